@@ -1,0 +1,38 @@
+"""nbcalib: target-less, single-shot, automatic LiDAR-camera extrinsic calibration.
+
+Importing the package is cheap: submodules (and numba) load on first use, and no kernel is
+compiled until it is first called.
+
+Stages of the method and where they live:
+
+- conventions and rigid transforms: :mod:`nbcalib.transforms` (``docs/conventions.md``)
+- camera models: :mod:`nbcalib.camera`
+- ``calib.json`` and other files: :mod:`nbcalib.io`
+- numba kernels: :mod:`nbcalib.kernels`, with slow references in :mod:`nbcalib.reference`
+"""
+
+from __future__ import annotations
+
+import importlib
+
+__version__ = "0.1.0"
+
+_SUBMODULES = {"camera", "transforms", "reference", "io", "kernels", "cli"}
+_EXPORTS = {
+    "create_camera": "camera",
+    "CameraModel": "camera",
+}
+
+__all__ = sorted([*_SUBMODULES, *_EXPORTS, "__version__"])
+
+
+def __getattr__(name: str):
+    if name in _SUBMODULES:
+        return importlib.import_module(f"nbcalib.{name}")
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(f"nbcalib.{_EXPORTS[name]}"), name)
+    raise AttributeError(f"module 'nbcalib' has no attribute {name!r}")
+
+
+def __dir__():
+    return __all__

@@ -1,0 +1,7 @@
+"""``python -m nbcalib`` runs the command line."""
+
+import sys
+
+from nbcalib.cli import main
+
+sys.exit(main())

@@ -1,0 +1,1 @@
+"""Subcommands of the ``nbcalib`` command line, one module each (see :mod:`nbcalib.cli`)."""

@@ -1,0 +1,48 @@
+"""Exceptions that separate a user's mistake from a bug.
+
+:class:`InputError` is raised for anything the user can fix (a missing or corrupt file, a wrong
+parameter count, an unknown topic). Its message is one line that names the file or option and the
+problem; the CLI prints it and exits with status 2, without a traceback. Any other exception is an
+internal failure (exit status 1).
+"""
+
+from __future__ import annotations
+
+import os
+
+
+class InputError(ValueError):
+    """Bad user input: one line naming the file or option and the problem.
+
+    Parameters
+    ----------
+    message : str
+        What is wrong, in one line.
+    path : str or os.PathLike, optional
+        The file concerned; prefixed to the message as ``"<path>: "``.
+    """
+
+    def __init__(self, message: str, path: str | os.PathLike | None = None):
+        self.path = None if path is None else os.fspath(path)
+        text = " ".join(str(message).split())  # one line, whatever the caller passed
+        super().__init__(f"{self.path}: {text}" if self.path else text)
+
+
+class MissingExtraError(InputError):
+    """An optional dependency is not installed; the message names the extra that provides it."""
+
+    def __init__(self, module: str, extra: str):
+        super().__init__(
+            f"this needs the optional package '{module}'; install it with "
+            f'pip install "nbcalib[{extra}]"'
+        )
+
+
+def require(module: str, extra: str):
+    """Import an optional dependency or raise :class:`MissingExtraError` naming its extra."""
+    import importlib
+
+    try:
+        return importlib.import_module(module)
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise MissingExtraError(module, extra) from exc

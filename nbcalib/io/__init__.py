@@ -1,0 +1,1 @@
+"""Reading and writing files: ``calib.json``, camera files, point clouds, images, bags."""

@@ -1,0 +1,42 @@
+"""JIT options for every numba kernel in nbcalib, kept in one place.
+
+Kernels are decorated with :data:`jit` (serial) or :data:`jit_parallel`; nothing else in the
+package passes options to numba. ``cache=True`` keeps compiled machine code between processes
+(numba writes it beside the sources or to ``NUMBA_CACHE_DIR``).
+
+numba's all-flags fast-math mode is never used: its ``nnan``/``ninf`` flags let LLVM assume that
+no value is NaN or inf, and the z-buffers (inf-initialised) and validity checks (NaN for invalid
+points) depend on exactly those values. :data:`FASTMATH_SAFE` lists the flags that keep IEEE
+semantics for inf and NaN; a kernel opts into them explicitly where a benchmark shows a gain.
+"""
+
+from __future__ import annotations
+
+import numba
+
+#: LLVM fast-math flags that keep inf/NaN semantics (no ``nnan``, no ``ninf``).
+FASTMATH_SAFE = frozenset({"nsz", "arcp", "contract", "afn", "reassoc"})
+
+#: Options of every serial kernel.
+JIT_OPTIONS = {"cache": True, "nogil": True, "error_model": "numpy"}
+
+#: Options of every parallel kernel (only where a benchmark shows a gain).
+JIT_PARALLEL_OPTIONS = {**JIT_OPTIONS, "parallel": True}
+
+
+def jit(func=None, *, fastmath=False):
+    """Compile ``func`` as a serial nopython kernel with the project's options."""
+
+    def wrap(f):
+        return numba.njit(**JIT_OPTIONS, fastmath=set(fastmath) if fastmath else False)(f)
+
+    return wrap if func is None else wrap(func)
+
+
+def jit_parallel(func=None, *, fastmath=False):
+    """Compile ``func`` as a parallel (``prange``) nopython kernel with the project's options."""
+
+    def wrap(f):
+        return numba.njit(**JIT_PARALLEL_OPTIONS, fastmath=set(fastmath) if fastmath else False)(f)
+
+    return wrap if func is None else wrap(func)

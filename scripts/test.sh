@@ -1,0 +1,13 @@
+#!/usr/bin/env bash
+# Install nbcalib with its test dependencies, then lint and run the test suite.
+# Usage: scripts/test.sh [extra pytest arguments]     (CI runs exactly this through .ci/run)
+set -euo pipefail
+cd "$(dirname "${BASH_SOURCE[0]}")/.."
+source scripts/env.sh
+nbcalib_env dev
+export MPLBACKEND=Agg
+echo "[nbcalib] ruff"
+python -m ruff check .
+python -m ruff format --check .
+echo "[nbcalib] pytest"
+python -m pytest "$@"

@@ -1,0 +1,28 @@
+"""Shared fixtures: seeded random generators, headless plotting, the real-data folder."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+os.environ.setdefault("MPLBACKEND", "Agg")
+
+#: ../shared/data/real relative to the project root (absent for package users: tests skip)
+REAL_DATA = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
+
+
+@pytest.fixture
+def rng():
+    """A fresh, seeded generator per test, so tests are independent and repeatable."""
+    return np.random.default_rng(12345)
+
+
+@pytest.fixture
+def real_data() -> Path:
+    """Path to the real LiDAR-camera data; skips the test when it is not present."""
+    if not REAL_DATA.is_dir():
+        pytest.skip(f"real data not present at {REAL_DATA}")
+    return REAL_DATA

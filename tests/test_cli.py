@@ -1,0 +1,61 @@
+"""The command line's contract: --help everywhere, exit statuses, one-line errors."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import pytest
+
+from nbcalib.cli import COMMAND_MODULES, main
+
+
+def test_top_level_help(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["--help"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    for name in COMMAND_MODULES:
+        assert name in out
+    assert "examples:" in out
+
+
+@pytest.mark.parametrize("name", COMMAND_MODULES)
+def test_every_command_has_help_with_examples(name, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main([name, "--help"])
+    assert exc.value.code == 0
+    out = capsys.readouterr().out
+    assert "examples:" in out and f"nbcalib {name}" in out
+
+
+def test_no_command_prints_help_and_fails(capsys):
+    assert main([]) == 2
+    assert "usage:" in capsys.readouterr().out
+
+
+def test_unknown_command_is_a_one_line_usage_error(capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["no-such-command"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err.strip()
+    assert len(err.splitlines()) == 1 and "invalid choice" in err
+
+
+def test_user_error_exit_2_without_traceback(capsys):
+    assert main(["selfcheck", "--width", "3"]) == 2
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "Traceback" not in err and "--width" in err
+
+
+def test_selfcheck_passes(capsys):
+    assert main(["selfcheck", "--step", "32"]) == 0
+    assert "7/7 camera models ok" in capsys.readouterr().out
+
+
+def test_console_script_runs():
+    """`python -m nbcalib` is the same program as the installed `nbcalib` script."""
+    out = subprocess.run(
+        [sys.executable, "-m", "nbcalib", "--version"], capture_output=True, text=True, check=True
+    )
+    assert out.stdout.startswith("nbcalib ")

@@ -1,0 +1,21 @@
+"""Named tolerances for the whole test suite: (rtol, atol) per quantity.
+
+A looser entry needs a comment saying why.
+Use as ``assert_allclose(a, b, **TOL["camera_roundtrip_px"])``.
+"""
+
+TOL = {
+    # integer outputs (histograms, index maps) are compared with np.array_equal, not here
+    "kernel_vs_reference": dict(rtol=1e-12, atol=1e-12),
+    # group operations in float64; exp/log chains lose a few ulps near pi
+    "transform": dict(rtol=1e-9, atol=1e-9),
+    # small rotation vectors (down to 1e-12 rad) and their exp/log round trips, compared as
+    # |a - b| <= rtol * |b|: an absolute tolerance would accept anything below it
+    "transform_relative": dict(rtol=1e-9, atol=0.0),
+    # pixel round trip project(unproject(uv)); Newton iterations converge to ~1e-12 px
+    "camera_roundtrip_px": dict(rtol=0.0, atol=1e-6),
+    # against OpenCV's projectPoints / fisheye.projectPoints (both float64)
+    "camera_vs_opencv_px": dict(rtol=0.0, atol=1e-6),
+    # analytic Jacobians vs central differences (h ~ 1e-6 relative): truncation ~1e-8
+    "jacobian_vs_finite_diff": dict(rtol=1e-5, atol=1e-5),
+}
