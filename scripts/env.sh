@@ -15,6 +15,6 @@ nbcalib_env() {
     source .venv/bin/activate
   fi
   echo "[nbcalib] installing nbcalib[$extras] into $(python -c 'import sys; print(sys.prefix)')"
-  python -m pip install --quiet --upgrade pip
-  python -m pip install --quiet -e ".[$extras]"
+  python -m pip install -qq --upgrade pip
+  python -m pip install -qq -e ".[$extras]"
 }
