@@ -1,0 +1,1 @@
+"""Fine registration (paper section III-E): NID cost, hidden-point removal, optimisers."""
