@@ -5,5 +5,6 @@ set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 source scripts/env.sh
 nbcalib_env all
+nbcalib_clear_stale_numba_cache
 nbcalib --help
 nbcalib selfcheck

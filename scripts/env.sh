@@ -18,3 +18,15 @@ nbcalib_env() {
   python -m pip install -qq --upgrade pip
   python -m pip install -qq -e ".[$extras]"
 }
+
+# numba's cache checks only each kernel's own source file, so a kernel that calls a changed
+# kernel in another module would keep running stale machine code. Kernels live in
+# nbcalib/kernels/; when any of them changes, drop every cached kernel.
+nbcalib_clear_stale_numba_cache() {
+  local stamp
+  stamp=$(cat nbcalib/kernels/*.py | python -c "import hashlib, sys; print(hashlib.sha256(sys.stdin.buffer.read()).hexdigest()[:16])")
+  if [ "$(cat .numba_kernels_stamp 2>/dev/null)" != "$stamp" ]; then
+    find nbcalib -name '*.nbi' -delete -o -name '*.nbc' -delete
+    echo "$stamp" > .numba_kernels_stamp
+  fi
+}

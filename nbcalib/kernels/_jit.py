@@ -23,12 +23,27 @@ JIT_OPTIONS = {"cache": True, "nogil": True, "error_model": "numpy"}
 #: Options of every parallel kernel (only where a benchmark shows a gain).
 JIT_PARALLEL_OPTIONS = {**JIT_OPTIONS, "parallel": True}
 
+#: Options of small per-point helpers that hot loops call (camera projections): numba inlines
+#: them into the caller at IR level, so LLVM sees one flat loop. Measured on the plumb_bob
+#: projection loop: 22 M points/s through an ordinary call, 90-115 M/s inlined; inlining the big
+#: Jacobian helpers instead cost ~18 s of compilation per caller, so only value helpers use it.
+JIT_INLINE_OPTIONS = {**JIT_OPTIONS, "inline": "always"}
+
 
 def jit(func=None, *, fastmath=False):
     """Compile ``func`` as a serial nopython kernel with the project's options."""
 
     def wrap(f):
         return numba.njit(**JIT_OPTIONS, fastmath=set(fastmath) if fastmath else False)(f)
+
+    return wrap if func is None else wrap(func)
+
+
+def jit_inline(func=None, *, fastmath=False):
+    """Compile ``func`` as a small helper that numba inlines into every kernel calling it."""
+
+    def wrap(f):
+        return numba.njit(**JIT_INLINE_OPTIONS, fastmath=set(fastmath) if fastmath else False)(f)
 
     return wrap if func is None else wrap(func)
 

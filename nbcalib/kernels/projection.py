@@ -28,7 +28,7 @@ import math
 
 import numpy as np
 
-from nbcalib.kernels._jit import jit
+from nbcalib.kernels._jit import jit, jit_inline
 
 N_PARAMS = 16
 P_FX, P_FY, P_CX, P_CY, P_XI = 0, 1, 2, 3, 4
@@ -55,7 +55,7 @@ _NEWTON_ITERS = 30
 # --------------------------------------------------------------------------------------------
 
 
-@jit
+@jit_inline
 def _distort_poly(params, x, y):
     """Brown-Conrady / rational distortion of a normalised point; returns (xd, yd, ok)."""
     k1 = params[P_DIST + 0]
@@ -177,30 +177,38 @@ def _undistort_poly(params, xd, yd):
 
 
 # --------------------------------------------------------------------------------------------
-# Per-model projection with Jacobian (d uv / d p_camera). The value-only path calls the same
-# functions; the extra arithmetic is a few multiplications per point.
+# Per-model projection. Value functions are small and inlined into every calling kernel
+# (jit_inline); the Jacobian functions repeat the value arithmetic expression for expression, so
+# both paths give bit-identical pixels (tested), and add the derivatives.
 # --------------------------------------------------------------------------------------------
+
+_NAN9 = (math.nan, math.nan, math.nan, math.nan, math.nan, math.nan, math.nan, math.nan, False)
+
+
+@jit_inline
+def _pinhole_family_value(params, X, Y, Z):
+    """pinhole, plumb_bob, rational_polynomial (they differ only in which coefficients are 0)."""
+    if not Z > 0.0:
+        return math.nan, math.nan, False
+    iz = 1.0 / Z
+    xd, yd, ok = _distort_poly(params, X * iz, Y * iz)
+    if not ok:
+        return math.nan, math.nan, False
+    return params[P_FX] * xd + params[P_CX], params[P_FY] * yd + params[P_CY], True
 
 
 @jit
-def _pinhole_family(params, X, Y, Z, want_jac):
-    """pinhole, plumb_bob, rational_polynomial (they differ only in which coefficients are 0)."""
-    nan = math.nan
+def _pinhole_family_jacobian(params, X, Y, Z):
     if not Z > 0.0:
-        return nan, nan, nan, nan, nan, nan, nan, nan, False
+        return _NAN9
     iz = 1.0 / Z
     x = X * iz
     y = Y * iz
-    fx = params[P_FX]
-    fy = params[P_FY]
-    if not want_jac:
-        xd, yd, ok = _distort_poly(params, x, y)
-        if not ok:
-            return nan, nan, nan, nan, nan, nan, nan, nan, False
-        return fx * xd + params[P_CX], fy * yd + params[P_CY], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, True
     xd, yd, a00, a01, a10, a11, ok = _distort_poly_jacobian(params, x, y)
     if not ok:
-        return nan, nan, nan, nan, nan, nan, nan, nan, False
+        return _NAN9
+    fx = params[P_FX]
+    fy = params[P_FY]
     # d(x, y)/dP = [[iz, 0, -x iz], [0, iz, -y iz]]
     j00 = fx * a00 * iz
     j01 = fx * a01 * iz
@@ -208,49 +216,66 @@ def _pinhole_family(params, X, Y, Z, want_jac):
     j10 = fy * a10 * iz
     j11 = fy * a11 * iz
     j12 = -fy * (a10 * x + a11 * y) * iz
-    u = fx * xd + params[P_CX]
-    v = fy * yd + params[P_CY]
-    return u, v, j00, j01, j02, j10, j11, j12, True
+    return fx * xd + params[P_CX], fy * yd + params[P_CY], j00, j01, j02, j10, j11, j12, True
 
 
-@jit
-def _fisheye(params, X, Y, Z, want_jac):
-    """Kannala-Brandt / OpenCV fisheye with theta = atan2(rho, z) (no |z| folding)."""
-    nan = math.nan
+@jit_inline
+def _fisheye_scale(params, X, Y, Z):
+    """Kannala-Brandt: s = theta_d / rho with theta = atan2(rho, z) (no |z| folding).
+
+    Returns ``(s, theta, rho, ok)``; near the axis (rho < 1e-4 z) the series of s is used.
+    """
+    rho = math.sqrt(X * X + Y * Y)
+    if not (rho > 0.0 or Z > 0.0):  # on the axis behind the camera, or NaN
+        return math.nan, math.nan, math.nan, False
+    theta = math.atan2(rho, Z)
+    if not theta <= params[P_LIMIT]:
+        return math.nan, math.nan, math.nan, False
+    if Z > 0.0 and rho < _SERIES_T * Z:
+        # s = (1/Z) (1 + (k1 - 1/3) t^2 + O(t^4)), t = rho / Z
+        q = rho / Z
+        return (1.0 + (params[P_DIST] - 1.0 / 3.0) * q * q) / Z, theta, rho, True
+    t2 = theta * theta
     k1 = params[P_DIST + 0]
     k2 = params[P_DIST + 1]
     k3 = params[P_DIST + 2]
     k4 = params[P_DIST + 3]
-    rho2 = X * X + Y * Y
-    rho = math.sqrt(rho2)
-    if not (rho > 0.0 or Z > 0.0):  # on the axis behind the camera, or NaN
-        return nan, nan, nan, nan, nan, nan, nan, nan, False
-    theta = math.atan2(rho, Z)
-    if not theta <= params[P_LIMIT]:
-        return nan, nan, nan, nan, nan, nan, nan, nan, False
+    theta_d = theta * (1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
+    return theta_d / rho, theta, rho, True
+
+
+@jit_inline
+def _fisheye_value(params, X, Y, Z):
+    s, _, _, ok = _fisheye_scale(params, X, Y, Z)
+    if not ok:
+        return math.nan, math.nan, False
+    return params[P_FX] * s * X + params[P_CX], params[P_FY] * s * Y + params[P_CY], True
+
+
+@jit
+def _fisheye_jacobian(params, X, Y, Z):
+    s, theta, rho, ok = _fisheye_scale(params, X, Y, Z)
+    if not ok:
+        return _NAN9
+    k1 = params[P_DIST + 0]
+    k2 = params[P_DIST + 1]
+    k3 = params[P_DIST + 2]
+    k4 = params[P_DIST + 3]
+    rho2 = rho * rho
     t2 = theta * theta
-    poly = 1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4)))
-    theta_d = theta * poly
-    dtheta_d = 1.0 + t2 * (3.0 * k1 + t2 * (5.0 * k2 + t2 * (7.0 * k3 + t2 * 9.0 * k4)))
-    small = Z > 0.0 and rho < _SERIES_T * Z
-    if small:
-        # s = theta_d / rho = (1/Z) (1 + (k1 - 1/3) t^2 + O(t^4)), t = rho / Z
+    if Z > 0.0 and rho < _SERIES_T * Z:
         q = rho / Z
         c = k1 - 1.0 / 3.0
-        s = (1.0 + c * q * q) / Z
         ds_drho_over_rho = 2.0 * c / (Z * Z * Z)
         ds_dz = -(1.0 + 3.0 * c * q * q) / (Z * Z)
     else:
-        s = theta_d / rho
+        theta_d = theta * (1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4))))
+        dtheta_d = 1.0 + t2 * (3.0 * k1 + t2 * (5.0 * k2 + t2 * (7.0 * k3 + t2 * 9.0 * k4)))
         n2 = rho2 + Z * Z
         ds_drho_over_rho = (dtheta_d * Z / n2 * rho - theta_d) / (rho2 * rho)
         ds_dz = -dtheta_d / n2
     fx = params[P_FX]
     fy = params[P_FY]
-    u = fx * s * X + params[P_CX]
-    v = fy * s * Y + params[P_CY]
-    if not want_jac:
-        return u, v, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, True
     # xd = s X, yd = s Y;  ds/dX = ds/drho * X / rho
     j00 = fx * (s + X * X * ds_drho_over_rho)
     j01 = fx * (X * Y * ds_drho_over_rho)
@@ -258,41 +283,59 @@ def _fisheye(params, X, Y, Z, want_jac):
     j10 = fy * (X * Y * ds_drho_over_rho)
     j11 = fy * (s + Y * Y * ds_drho_over_rho)
     j12 = fy * (Y * ds_dz)
+    u = fx * s * X + params[P_CX]
+    v = fy * s * Y + params[P_CY]
     return u, v, j00, j01, j02, j10, j11, j12, True
 
 
-@jit
-def _atan(params, X, Y, Z, want_jac):
+@jit_inline
+def _atan_factor(params, r2):
+    """FOV model factor f(r) = atan(a r) / (w r), a = 2 tan(w / 2); series near r = 0."""
+    w = params[P_DIST]
+    if w < 1e-7:
+        return 1.0
+    a = 2.0 * math.tan(0.5 * w)
+    r = math.sqrt(r2)
+    s = a * r
+    if s < _SERIES_T:
+        return a / w * (1.0 - s * s / 3.0 + s * s * s * s / 5.0)
+    return math.atan(s) / (w * r)
+
+
+@jit_inline
+def _atan_value(params, X, Y, Z):
     """FOV (ATAN) model of Devernay and Faugeras, omega in params[P_DIST]."""
-    nan = math.nan
     if not Z > 0.0:
-        return nan, nan, nan, nan, nan, nan, nan, nan, False
+        return math.nan, math.nan, False
+    iz = 1.0 / Z
+    x = X * iz
+    y = Y * iz
+    f = _atan_factor(params, x * x + y * y)
+    return params[P_FX] * f * x + params[P_CX], params[P_FY] * f * y + params[P_CY], True
+
+
+@jit
+def _atan_jacobian(params, X, Y, Z):
+    if not Z > 0.0:
+        return _NAN9
     w = params[P_DIST]
     iz = 1.0 / Z
     x = X * iz
     y = Y * iz
     r2 = x * x + y * y
-    r = math.sqrt(r2)
+    f = _atan_factor(params, r2)
     if w < 1e-7:
-        f = 1.0
         g = 0.0
     else:
         a = 2.0 * math.tan(0.5 * w)
+        r = math.sqrt(r2)
         s = a * r
         if s < _SERIES_T:
-            # atan(s)/s = 1 - s^2/3 + s^4/5
-            f = a / w * (1.0 - s * s / 3.0 + s * s * s * s / 5.0)
             g = a * a * a / w * (-2.0 / 3.0 + 4.0 * s * s / 5.0)
         else:
-            at = math.atan(s)
-            f = at / (w * r)
-            g = (s / (1.0 + s * s) - at) / (w * r2 * r)  # f'(r) / r
+            g = (s / (1.0 + s * s) - math.atan(s)) / (w * r2 * r)  # f'(r) / r
     fx = params[P_FX]
     fy = params[P_FY]
-    u = fx * f * x + params[P_CX]
-    v = fy * f * y + params[P_CY]
-    if not want_jac:
-        return u, v, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, True
     a00 = f + g * x * x
     a01 = g * x * y
     a11 = f + g * y * y
@@ -302,34 +345,45 @@ def _atan(params, X, Y, Z, want_jac):
     j10 = fy * a01 * iz
     j11 = fy * a11 * iz
     j12 = -fy * (a01 * x + a11 * y) * iz
-    return u, v, j00, j01, j02, j10, j11, j12, True
+    return fx * f * x + params[P_CX], fy * f * y + params[P_CY], j00, j01, j02, j10, j11, j12, True
 
 
-@jit
-def _omnidir(params, X, Y, Z, want_jac):
-    """Unified (Mei) omnidirectional model: sphere, then a pinhole at -xi, then k1 k2 p1 p2."""
-    nan = math.nan
+@jit_inline
+def _omnidir_denominator(params, X, Y, Z):
+    """Unified (Mei) model: ``d = z + xi |P|`` on the visible part of the sphere, else NaN."""
     xi = params[P_XI]
     n = math.sqrt(X * X + Y * Y + Z * Z)
     if not n > 0.0:
-        return nan, nan, nan, nan, nan, nan, nan, nan, False
+        return math.nan, n
     # visible part of the sphere: s_z > -min(xi, 1/xi) (tangent cone for xi > 1)
     zmin = -min(xi, 1.0 / xi) if xi > 0.0 else 0.0
     if not Z > zmin * n:
-        return nan, nan, nan, nan, nan, nan, nan, nan, False
-    d = Z + xi * n
-    x = X / d
-    y = Y / d
+        return math.nan, n
+    return Z + xi * n, n
+
+
+@jit_inline
+def _omnidir_value(params, X, Y, Z):
+    d, _ = _omnidir_denominator(params, X, Y, Z)
+    if not d > 0.0:
+        return math.nan, math.nan, False
+    xd, yd, ok = _distort_poly(params, X / d, Y / d)
+    if not ok:
+        return math.nan, math.nan, False
+    return params[P_FX] * xd + params[P_CX], params[P_FY] * yd + params[P_CY], True
+
+
+@jit
+def _omnidir_jacobian(params, X, Y, Z):
+    d, n = _omnidir_denominator(params, X, Y, Z)
+    if not d > 0.0:
+        return _NAN9
+    xi = params[P_XI]
+    xd, yd, a00, a01, a10, a11, ok = _distort_poly_jacobian(params, X / d, Y / d)
+    if not ok:
+        return _NAN9
     fx = params[P_FX]
     fy = params[P_FY]
-    if not want_jac:
-        xd, yd, ok = _distort_poly(params, x, y)
-        if not ok:
-            return nan, nan, nan, nan, nan, nan, nan, nan, False
-        return fx * xd + params[P_CX], fy * yd + params[P_CY], 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, True
-    xd, yd, a00, a01, a10, a11, ok = _distort_poly_jacobian(params, x, y)
-    if not ok:
-        return nan, nan, nan, nan, nan, nan, nan, nan, False
     # d d / dP = xi P / n + e_z
     id2 = 1.0 / (d * d)
     dd_dx = xi * X / n
@@ -350,24 +404,26 @@ def _omnidir(params, X, Y, Z, want_jac):
     return fx * xd + params[P_CX], fy * yd + params[P_CY], j00, j01, j02, j10, j11, j12, True
 
 
-@jit
-def _equirectangular(params, X, Y, Z, want_jac):
+@jit_inline
+def _equirectangular_value(params, X, Y, Z):
     """Longitude atan2(x, z) across the width, latitude down the height; poles excluded."""
-    nan = math.nan
-    W = params[P_WIDTH]
-    H = params[P_HEIGHT]
+    q = math.sqrt(X * X + Z * Z)
+    if not q > 0.0:  # the two pole rays (and NaN) have no longitude
+        return math.nan, math.nan, False
+    u = params[P_WIDTH] * (0.5 + math.atan2(X, Z) / (2.0 * math.pi)) - 0.5
+    v = params[P_HEIGHT] * (0.5 + math.atan2(Y, q) / math.pi) - 0.5
+    return u, v, True
+
+
+@jit
+def _equirectangular_jacobian(params, X, Y, Z):
+    u, v, ok = _equirectangular_value(params, X, Y, Z)
+    if not ok:
+        return _NAN9
     q2 = X * X + Z * Z
     q = math.sqrt(q2)
-    if not q > 0.0:  # the two pole rays (and NaN) have no longitude
-        return nan, nan, nan, nan, nan, nan, nan, nan, False
-    lon = math.atan2(X, Z)
-    lat_down = math.atan2(Y, q)  # = asin(Y / |P|), positive downwards
-    u = W * (0.5 + lon / (2.0 * math.pi)) - 0.5
-    v = H * (0.5 + lat_down / math.pi) - 0.5
-    if not want_jac:
-        return u, v, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, True
-    cu = W / (2.0 * math.pi)
-    cv = H / math.pi
+    cu = params[P_WIDTH] / (2.0 * math.pi)
+    cv = params[P_HEIGHT] / math.pi
     n2 = q2 + Y * Y
     j00 = cu * Z / q2
     j01 = 0.0
@@ -378,27 +434,25 @@ def _equirectangular(params, X, Y, Z, want_jac):
     return u, v, j00, j01, j02, j10, j11, j12, True
 
 
-@jit
-def _project_dispatch(model_id, params, X, Y, Z, want_jac):
-    if not (math.isfinite(X) and math.isfinite(Y) and math.isfinite(Z)):
-        nan = math.nan
-        return nan, nan, nan, nan, nan, nan, nan, nan, False
-    if model_id <= RATIONAL_POLYNOMIAL:
-        return _pinhole_family(params, X, Y, Z, want_jac)
-    if model_id == FISHEYE:
-        return _fisheye(params, X, Y, Z, want_jac)
-    if model_id == ATAN:
-        return _atan(params, X, Y, Z, want_jac)
-    if model_id == OMNIDIR:
-        return _omnidir(params, X, Y, Z, want_jac)
-    return _equirectangular(params, X, Y, Z, want_jac)
+@jit_inline
+def _finite3(X, Y, Z):
+    return math.isfinite(X) and math.isfinite(Y) and math.isfinite(Z)
 
 
-@jit
+@jit_inline
 def project_point(model_id, params, X, Y, Z):
     """Project one camera-frame point; returns ``(u, v, valid)``. For use inside kernels."""
-    r = _project_dispatch(model_id, params, X, Y, Z, False)
-    return r[0], r[1], r[8]
+    if not _finite3(X, Y, Z):
+        return math.nan, math.nan, False
+    if model_id <= RATIONAL_POLYNOMIAL:
+        return _pinhole_family_value(params, X, Y, Z)
+    if model_id == FISHEYE:
+        return _fisheye_value(params, X, Y, Z)
+    if model_id == ATAN:
+        return _atan_value(params, X, Y, Z)
+    if model_id == OMNIDIR:
+        return _omnidir_value(params, X, Y, Z)
+    return _equirectangular_value(params, X, Y, Z)
 
 
 @jit
@@ -407,7 +461,17 @@ def project_point_jacobian(model_id, params, X, Y, Z):
 
     Returns ``(u, v, j00, j01, j02, j10, j11, j12, valid)``, row-major 2 x 3 Jacobian.
     """
-    return _project_dispatch(model_id, params, X, Y, Z, True)
+    if not _finite3(X, Y, Z):
+        return _NAN9
+    if model_id <= RATIONAL_POLYNOMIAL:
+        return _pinhole_family_jacobian(params, X, Y, Z)
+    if model_id == FISHEYE:
+        return _fisheye_jacobian(params, X, Y, Z)
+    if model_id == ATAN:
+        return _atan_jacobian(params, X, Y, Z)
+    if model_id == OMNIDIR:
+        return _omnidir_jacobian(params, X, Y, Z)
+    return _equirectangular_jacobian(params, X, Y, Z)
 
 
 # --------------------------------------------------------------------------------------------
