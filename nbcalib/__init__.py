@@ -8,6 +8,8 @@ Stages of the method and where they live:
 - conventions and rigid transforms: :mod:`nbcalib.transforms` (``docs/conventions.md``)
 - camera models: :mod:`nbcalib.camera`
 - ``calib.json`` and other files: :mod:`nbcalib.io`
+- dense clouds, LiDAR images, work directories: :mod:`nbcalib.preprocess`
+- fine registration (NID): :mod:`nbcalib.registration`
 - numba kernels: :mod:`nbcalib.kernels`, with slow references in :mod:`nbcalib.reference`
 """
 
@@ -17,7 +19,17 @@ import importlib
 
 __version__ = "0.1.0"
 
-_SUBMODULES = {"camera", "transforms", "reference", "io", "kernels", "cli"}
+_SUBMODULES = {
+    "camera",
+    "transforms",
+    "reference",
+    "io",
+    "kernels",
+    "cli",
+    "metrics",
+    "preprocess",
+    "registration",
+}
 _EXPORTS = {
     "create_camera": "camera",
     "CameraModel": "camera",

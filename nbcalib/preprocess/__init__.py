@@ -1,0 +1,14 @@
+"""Preprocessing: from raw scans and an image to a work directory (paper section III-C, III-D).
+
+Modules (import them directly; this package imports nothing, so it stays cheap):
+
+- :mod:`nbcalib.preprocess.intensity`: rank-based equalisation of point intensities and
+  histogram equalisation of camera images (both optional).
+- :mod:`nbcalib.preprocess.integrate`: dense clouds from many scans, static (voxel
+  de-duplication) or dynamic (motion-compensated continuous-time ICP).
+- :mod:`nbcalib.preprocess.lidar_image`: the LiDAR field of view, the virtual camera, z-buffer
+  rendering of the intensity image and the index map, and hidden-point removal.
+- :mod:`nbcalib.preprocess.workdir`: reading and writing the work directory shared with the
+  reference toolbox (``<name>.png``, ``<name>.ply``, ``<name>_lidar_intensities.png``,
+  ``<name>_lidar_indices.png``, ``calib.json``).
+"""
