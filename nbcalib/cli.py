@@ -20,7 +20,7 @@ from nbcalib import __version__
 from nbcalib.errors import InputError
 
 #: Command modules in the order ``--help`` lists them (the order of the method's stages).
-COMMAND_MODULES = ("selfcheck", "calibrate", "evaluate")
+COMMAND_MODULES = ("selfcheck", "synth", "calibrate", "evaluate")
 
 EPILOG = """\
 examples:

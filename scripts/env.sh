@@ -20,11 +20,13 @@ nbcalib_env() {
 }
 
 # numba's cache checks only each kernel's own source file, so a kernel that calls a changed
-# kernel in another module would keep running stale machine code. Kernels live in
-# nbcalib/kernels/; when any of them changes, drop every cached kernel.
+# kernel in another module would keep running stale machine code. When any module that
+# compiles kernels (nbcalib/kernels/ and the modules importing its JIT helpers) changes, drop
+# every cached kernel.
 nbcalib_clear_stale_numba_cache() {
   local stamp
-  stamp=$(cat nbcalib/kernels/*.py | python -c "import hashlib, sys; print(hashlib.sha256(sys.stdin.buffer.read()).hexdigest()[:16])")
+  stamp=$( { ls nbcalib/kernels/*.py; grep -rl --include='*.py' "kernels._jit import" nbcalib; } \
+    | sort -u | xargs cat | python -c "import hashlib, sys; print(hashlib.sha256(sys.stdin.buffer.read()).hexdigest()[:16])")
   if [ "$(cat .numba_kernels_stamp 2>/dev/null)" != "$stamp" ]; then
     find nbcalib -name '*.nbi' -delete -o -name '*.nbc' -delete
     echo "$stamp" > .numba_kernels_stamp

@@ -21,4 +21,9 @@ TOL = {
     # ray caster kernel vs reference: the reference intersects a box as six rectangles (the
     # kernel uses slabs) and surface coordinates grow with the distance (up to ~100 m here)
     "raycast_vs_reference": dict(rtol=1e-9, atol=1e-9),
+    # Kabsch rotation of two exactly consistent bearing pairs: one 3 x 3 SVD, ~1e-15
+    "kabsch_rotation": dict(rtol=0.0, atol=1e-12),
+    # noise-free 2D-3D correspondences: LM converges to the true pose up to its step tolerance
+    # (radians and metres; 1e-9 is far below any pixel effect)
+    "pose_noise_free": dict(rtol=0.0, atol=1e-9),
 }

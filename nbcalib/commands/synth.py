@@ -1,0 +1,202 @@
+"""``nbcalib synth``: a synthetic LiDAR-camera data set with a known answer."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+
+LIDARS = ("spinning16", "spinning32", "spinning64", "spinning128", "livox")
+CAMERAS = (
+    "pinhole",
+    "plumb_bob",
+    "rational_polynomial",
+    "fisheye",
+    "atan",
+    "omnidir",
+    "equirectangular",
+)
+SCENES = ("room", "street")
+FORMATS = ("files", "bag1", "bag2", "mcap")
+
+DESCRIPTION = """\
+Simulate a LiDAR-camera rig with a known extrinsic calibration in a procedurally generated room
+or street: per pair, a few seconds of LiDAR scans (spinning LiDARs nod up and down as the
+method's collection procedure asks, a rosette LiDAR holds still; scans are motion-distorted and
+carry per-point times and rings) and the camera image taken at the start of the first scan, with
+the rig at rest. Pairs share the rig, not the scene.
+
+Writes OUT/ground_truth.json ({"T_lidar_camera": [x,y,z,qx,qy,qz,qw], "T_camera_lidar": 4x4},
+plus the data's description), written last, so a crashed run has none; OUT/camera.yaml; and per
+pair either pair_NNN.png + pair_NNN.pcd (all scans, t = seconds since the image; a moving rig
+also gets pair_NNN_scans/scan_MMMM.pcd, one per scan) or one bag (ROS 1 .bag, ROS 2 sqlite3 or
+mcap folder) with /points (PointCloud2: x, y, z, intensity, t, ring), /image, /camera_info and
+/tf_static (lidar -> camera).
+"""
+
+EPILOG = """\
+examples:
+  nbcalib synth out --lidar livox --camera omnidir --pairs 3 --seed 1
+  nbcalib synth out --lidar spinning64 --camera fisheye --scene street --format bag2
+  nbcalib synth out --lidar spinning16 --format bag1 --duration 4 --image-size 640x480
+  nbcalib synth out --lidar spinning128 --scene street --motion drive --format mcap
+  nbcalib synth out --T-lidar-camera 0.05,-0.1,0.02,0.5,-0.5,0.5,-0.5
+  nbcalib evaluate work --ground-truth out/ground_truth.json
+"""
+
+
+def _image_size(text: str) -> tuple[int, int]:
+    try:
+        width, height = (int(v) for v in text.lower().split("x"))
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected WIDTHxHEIGHT, got {text!r}") from None
+    if width < 16 or height < 16:
+        raise argparse.ArgumentTypeError(f"image size must be at least 16x16, got {text!r}")
+    return width, height
+
+
+def add_parser(subparsers, formatter_class) -> argparse.ArgumentParser:
+    """Register ``synth``."""
+    p = subparsers.add_parser(
+        "synth",
+        help="synthetic LiDAR-camera data with ground truth",
+        description=DESCRIPTION,
+        epilog=EPILOG,
+        formatter_class=formatter_class,
+    )
+    p.add_argument("out", metavar="OUT", help="output folder (created)")
+    p.add_argument("--lidar", choices=LIDARS, default="spinning64", help="LiDAR model")
+    p.add_argument("--camera", choices=CAMERAS, default="pinhole", help="camera model")
+    p.add_argument("--scene", choices=SCENES, default="room", help="kind of scene")
+    p.add_argument("--pairs", type=int, default=1, metavar="N", help="number of LiDAR-image pairs")
+    p.add_argument("--seed", type=int, default=0, metavar="S", help="seed of everything")
+    p.add_argument(
+        "--format", choices=FORMATS, default="files", dest="fmt", help="PNG + PCD files or bags"
+    )
+    p.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="LiDAR data per pair (default: 3 s for spinning16, 2 s for spinning32/64, 1.5 s for "
+        "spinning128, 10 s for livox)",
+    )
+    p.add_argument(
+        "--motion",
+        choices=("nod", "drive", "static"),
+        default=None,
+        help="rig motion (default: nod for spinning LiDARs, static for livox)",
+    )
+    p.add_argument(
+        "--image-size",
+        type=_image_size,
+        default=None,
+        metavar="WxH",
+        help="camera image size (default 1280x960; equirectangular 1280x640)",
+    )
+    colour = p.add_mutually_exclusive_group()
+    colour.add_argument("--color", dest="color", action="store_true", help="RGB images")
+    colour.add_argument("--gray", dest="color", action="store_false", help="grey images")
+    p.set_defaults(color=True)
+    p.add_argument(
+        "--modality-gap",
+        type=float,
+        default=1.0,
+        metavar="G",
+        help="camera/LiDAR texture gap in [0, 1] (0: LiDAR reflectivity = camera albedo)",
+    )
+    p.add_argument(
+        "--T-lidar-camera",
+        dest="T_lidar_camera",
+        default=None,
+        metavar="x,y,z,qx,qy,qz,qw",
+        help="ground-truth extrinsics as in calib.json (p_lidar = T_lidar_camera p_camera; "
+        "default: drawn from the seed like a real rig, 5-30 cm, any direction)",
+    )
+    p.add_argument(
+        "--parallel",
+        action="store_true",
+        help="use the parallel kernels (same output; no gain measured yet, docs/BENCHMARKS.md)",
+    )
+    return p
+
+
+class _ProgressBar:
+    """A one-line progress bar on stderr (only when stderr is a terminal)."""
+
+    def __init__(self, enabled: bool):
+        self.enabled = enabled and sys.stderr.isatty()
+        self.start = time.perf_counter()
+
+    def __call__(self, done: int, total: int, what: str) -> None:
+        if not self.enabled:
+            return
+        width = 30
+        filled = int(width * done / max(total, 1))
+        elapsed = time.perf_counter() - self.start
+        bar = "#" * filled + "." * (width - filled)
+        sys.stderr.write(
+            f"\r[{bar}] {100 * done / max(total, 1):3.0f}% {elapsed:5.1f} s  {what:<30}"
+        )
+        sys.stderr.flush()
+
+    def close(self) -> None:
+        if self.enabled:
+            sys.stderr.write("\n")
+            sys.stderr.flush()
+
+
+def run(args) -> int:
+    """Simulate and write the data set; returns 0."""
+    from pathlib import Path
+
+    from nbcalib.errors import InputError
+    from nbcalib.synthetic import RigConfig
+    from nbcalib.synthetic.export import export_dataset
+
+    out = Path(args.out)
+    if out.exists() and not out.is_dir():
+        raise InputError("exists and is not a folder", path=out)
+    if args.pairs < 1:
+        raise InputError(f"--pairs must be at least 1, got {args.pairs}")
+    if args.duration is not None and not args.duration > 0:
+        raise InputError(f"--duration must be > 0 seconds, got {args.duration}")
+    if not 0.0 <= args.modality_gap <= 1.0:
+        raise InputError(f"--modality-gap must be in [0, 1], got {args.modality_gap}")
+    T_camera_lidar = None
+    if args.T_lidar_camera is not None:
+        from nbcalib.transforms import invert_T, pose_from_xyz_quat
+
+        try:
+            values = [float(v) for v in args.T_lidar_camera.split(",")]
+            if len(values) != 7:
+                raise ValueError(f"expected 7 numbers, got {len(values)}")
+            T_camera_lidar = invert_T(pose_from_xyz_quat(values))
+        except ValueError as exc:
+            raise InputError(f"--T-lidar-camera: {exc}") from None
+    config = RigConfig(
+        T_camera_lidar=T_camera_lidar,
+        lidar=args.lidar,
+        camera=args.camera,
+        scene=args.scene,
+        seed=args.seed,
+        duration=args.duration,
+        motion=args.motion,
+        image_size=args.image_size,
+        color=args.color,
+        modality_gap=args.modality_gap,
+        parallel=args.parallel,
+    )
+    start = time.perf_counter()
+    bar = _ProgressBar(enabled=not getattr(args, "quiet", False))
+    try:
+        truth = export_dataset(config, out, pairs=args.pairs, fmt=args.fmt, progress=bar)
+    finally:
+        bar.close()
+    points = sum(p["num_points"] for p in truth["pairs"])
+    print(
+        f"nbcalib synth: {args.pairs} pair(s), {points} LiDAR points, {args.lidar} + "
+        f"{args.camera} in a {args.scene}, {args.fmt}, in {time.perf_counter() - start:.1f} s; "
+        f"ground truth: {out / 'ground_truth.json'}"
+    )
+    return 0

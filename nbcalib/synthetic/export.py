@@ -1,0 +1,254 @@
+"""Write synthetic pairs to disk in the formats users have (``nbcalib synth``).
+
+Layout of ``OUT`` (``name`` = ``pair_000``, ``pair_001``, ...)::
+
+    OUT/camera.yaml                 the camera (nbcalib camera file)
+    OUT/<name>.png                  files: the image, taken at the start of the first scan
+    OUT/<name>.pcd                  files: every scan of the pair; t = seconds since the image
+    OUT/<name>_scans/scan_0000.pcd  files, moving rig only: one PCD per scan, t = seconds since
+                                    that scan's start (for motion-compensated integration)
+    OUT/<name>.bag                  bag1: ROS 1 bag          } one bag per pair: tf_static,
+    OUT/<name>/                     bag2 / mcap: ROS 2 bag   } camera_info, image, then scans
+    OUT/ground_truth.json           written last: a run that crashed has none
+
+PCD and PointCloud2 fields: ``x, y, z`` float32 (metres, LiDAR frame at the point's time),
+``intensity`` float32 (0-255), ``t`` float32 (seconds), ``ring`` uint16. Bags hold the topics of
+:data:`TOPICS` in the frames :data:`FRAMES`; the image and the first scan share the stamp
+``BASE_STAMP_NS + 1000 s * pair``.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from collections.abc import Callable
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+
+from nbcalib.synthetic.lidar import LidarScan
+from nbcalib.synthetic.rig import RigConfig, SyntheticSequence, generate_sequence
+from nbcalib.transforms import pose_to_xyz_quat
+
+__all__ = [
+    "BASE_STAMP_NS",
+    "FORMATS",
+    "FRAMES",
+    "TOPICS",
+    "export_dataset",
+    "ground_truth_dict",
+    "pair_name",
+    "scan_fields",
+    "write_sequence_bag",
+    "write_sequence_files",
+]
+
+FORMATS = ("files", "bag1", "bag2", "mcap")
+#: Topics of the bags
+TOPICS = {
+    "points": "/points",
+    "image": "/image",
+    "camera_info": "/camera_info",
+}
+#: Frame ids of the bags: the LiDAR body frame and the camera optical frame
+FRAMES = {"lidar": "lidar", "camera": "camera"}
+#: Stamp of the first pair's image and first scan (2023-11-14 22:13:20 UTC), nanoseconds
+BASE_STAMP_NS = 1_700_000_000 * 1_000_000_000
+
+
+def pair_name(pair: int) -> str:
+    """File stem of a pair: ``pair_000``."""
+    return f"pair_{pair:03d}"
+
+
+def scan_fields(scan: LidarScan, *, time_offset: float = 0.0) -> dict[str, np.ndarray]:
+    """The point fields of a scan as written: x, y, z, intensity, t (+ ``time_offset``), ring."""
+    return {
+        "x": scan.points[:, 0].astype(np.float32),
+        "y": scan.points[:, 1].astype(np.float32),
+        "z": scan.points[:, 2].astype(np.float32),
+        "intensity": scan.intensities.astype(np.float32),
+        "t": (scan.times + time_offset).astype(np.float32),
+        "ring": scan.rings.astype(np.uint16),
+    }
+
+
+def _moving(sequence: SyntheticSequence) -> bool:
+    return sequence.motion.kind != "static" and len(sequence.scans) > 1
+
+
+def write_sequence_files(sequence: SyntheticSequence, out_dir, name: str) -> dict:
+    """Write one pair as a PNG and PCD files; returns the written names (relative to out_dir)."""
+    from nbcalib.io.image import write_png
+    from nbcalib.io.pointcloud import write_pcd
+
+    out_dir = Path(out_dir)
+    write_png(out_dir / f"{name}.png", sequence.image)
+    merged = [scan_fields(scan, time_offset=scan.stamp) for scan in sequence.scans]
+    write_pcd(
+        out_dir / f"{name}.pcd",
+        {key: np.concatenate([f[key] for f in merged]) for key in merged[0]},
+    )
+    written = {"image": f"{name}.png", "points": f"{name}.pcd"}
+    if _moving(sequence):
+        folder = out_dir / f"{name}_scans"
+        folder.mkdir(parents=True, exist_ok=True)
+        scans = []
+        for k, scan in enumerate(sequence.scans):
+            write_pcd(folder / f"scan_{k:04d}.pcd", scan_fields(scan))
+            scans.append(f"{name}_scans/scan_{k:04d}.pcd")
+        written["scans"] = scans
+    return written
+
+
+def write_sequence_bag(sequence: SyntheticSequence, path, fmt: str, *, stamp_ns: int) -> None:
+    """Write one pair as a ROS bag: tf_static, camera_info, the image, then every scan.
+
+    Parameters
+    ----------
+    sequence : SyntheticSequence
+        The pair.
+    path : str or os.PathLike
+        ``.bag`` file (``bag1``) or bag folder (``bag2``, ``mcap``).
+    fmt : {"bag1", "bag2", "mcap"}
+        Bag format.
+    stamp_ns : int
+        Stamp of the image and of the first scan, nanoseconds.
+    """
+    from nbcalib.io.bag import BagWriter
+
+    lidar, camera = FRAMES["lidar"], FRAMES["camera"]
+    with BagWriter(path, fmt) as bag:
+        bag.write_tf_static(stamp_ns, lidar, camera, sequence.T_lidar_camera)
+        bag.write_camera_info(TOPICS["camera_info"], stamp_ns, sequence.camera, camera)
+        bag.write_image(TOPICS["image"], stamp_ns, sequence.image, camera)
+        for scan in sequence.scans:
+            scan_stamp = stamp_ns + round(scan.stamp * 1e9)
+            bag.write_pointcloud(TOPICS["points"], scan_stamp, scan_fields(scan), lidar)
+
+
+def ground_truth_dict(config: RigConfig, sequences_info: list[dict], T_camera_lidar) -> dict:
+    """The content of ``ground_truth.json``.
+
+    ``T_lidar_camera`` is ``[x, y, z, qx, qy, qz, qw]`` (``p_lidar = T_lidar_camera @ p_camera``,
+    the ``calib.json`` direction) and ``T_camera_lidar`` the 4 x 4 inverse; the other keys
+    describe the data (rig, LiDAR, scene, seed, pairs with their files and ground-truth poses).
+    """
+    T_camera_lidar = np.asarray(T_camera_lidar, dtype=np.float64)
+    T_lidar_camera = np.linalg.inv(T_camera_lidar)
+    return {
+        "T_lidar_camera": [float(v) for v in pose_to_xyz_quat(T_lidar_camera)],
+        "T_camera_lidar": T_camera_lidar.tolist(),
+        "lidar": config.lidar,
+        "camera_model": config.camera if config.camera_model is None else config.camera_model.model,
+        "scene": config.scene,
+        "seed": config.seed,
+        "modality_gap": config.modality_gap,
+        "frames": FRAMES,
+        "topics": TOPICS,
+        "conventions": "docs/conventions.md: p_a = T_a_b p_b; quaternions xyzw; the world is "
+        "the LiDAR frame at the start of each pair's first scan (= the image time)",
+        "pairs": sequences_info,
+    }
+
+
+def _sequence_info(sequence: SyntheticSequence, stamp_ns: int, written: dict) -> dict:
+    lidar = sequence.lidar
+    info = {
+        "name": pair_name(sequence.pair),
+        **written,
+        "image_stamp_ns": stamp_ns,
+        "scan_stamps_ns": [stamp_ns + round(s * 1e9) for s in sequence.scan_stamps],
+        "scan_period": lidar.scan_period,
+        "num_points": int(sum(len(s) for s in sequence.scans)),
+        "motion": sequence.motion.kind,
+        "lidar_config": asdict(lidar),
+    }
+    if _moving(sequence):
+        # ground-truth T_world_lidar at each scan start, [x, y, z, qx, qy, qz, qw]; the world is
+        # the LiDAR frame at the image time (static rigs: the identity throughout)
+        info["T_world_lidar_scan_begin"] = [
+            [round(float(v), 12) for v in pose_to_xyz_quat(T)] for T in sequence.scan_poses_begin
+        ]
+    return info
+
+
+def export_dataset(
+    config: RigConfig,
+    out_dir,
+    *,
+    pairs: int = 1,
+    fmt: str = "files",
+    progress: Callable[[int, int, str], None] | None = None,
+) -> dict:
+    """Simulate ``pairs`` pairs and write them, the camera and the ground truth to ``out_dir``.
+
+    Parameters
+    ----------
+    config : RigConfig
+        What to simulate.
+    out_dir : str or os.PathLike
+        Output folder (created; existing files of the same names are replaced).
+    pairs : int
+        Number of pairs (one scene and trajectory each, the same rig).
+    fmt : {"files", "bag1", "bag2", "mcap"}
+        PNG + PCD files, or one bag per pair.
+    progress : callable, optional
+        ``progress(done, total, what)`` after each simulated or written step.
+
+    Returns
+    -------
+    dict
+        The ground truth as written to ``out_dir/ground_truth.json``.
+    """
+    from nbcalib.io.camera_file import save_camera
+
+    if fmt not in FORMATS:
+        raise ValueError(f"fmt must be one of {FORMATS}, got {fmt!r}")
+    if pairs < 1:
+        raise ValueError(f"pairs must be >= 1, got {pairs}")
+    out_dir = Path(out_dir)
+    out_dir.mkdir(parents=True, exist_ok=True)
+    truth_path = out_dir / "ground_truth.json"
+    if truth_path.exists():
+        truth_path.unlink()  # a half-rewritten folder must not look complete
+    infos = []
+    T_camera_lidar = None
+    camera = None
+    for pair in range(pairs):
+
+        def step(done, total, what, pair=pair):
+            # pairs have the same number of steps; report the fraction of all of them
+            if progress:
+                progress(pair * total + done, pairs * total, f"pair {pair + 1}/{pairs}: {what}")
+
+        sequence = generate_sequence(config, pair=pair, progress=step)
+        name = pair_name(pair)
+        stamp_ns = BASE_STAMP_NS + pair * 1000 * 1_000_000_000
+        if fmt == "files":
+            written = write_sequence_files(sequence, out_dir, name)
+        else:
+            bag_name = f"{name}.bag" if fmt == "bag1" else name
+            _remove(out_dir / bag_name)
+            write_sequence_bag(sequence, out_dir / bag_name, fmt, stamp_ns=stamp_ns)
+            written = {"bag": bag_name}
+        infos.append(_sequence_info(sequence, stamp_ns, written))
+        T_camera_lidar = sequence.T_camera_lidar
+        camera = sequence.camera
+    save_camera(out_dir / "camera.yaml", camera)
+    truth = ground_truth_dict(config, infos, T_camera_lidar)
+    tmp = truth_path.with_name(f".{truth_path.name}.tmp")
+    tmp.write_text(json.dumps(truth, indent=2, sort_keys=True) + "\n")
+    os.replace(tmp, truth_path)
+    return truth
+
+
+def _remove(path: Path) -> None:
+    """Delete a previous bag file or folder of the same name (re-running into the same OUT)."""
+    import shutil
+
+    if path.is_dir():
+        shutil.rmtree(path)
+    elif path.exists():
+        path.unlink()
