@@ -12,6 +12,8 @@ semantics for inf and NaN; a kernel opts into them explicitly where a benchmark 
 
 from __future__ import annotations
 
+import types
+
 import numba
 
 #: LLVM fast-math flags that keep inf/NaN semantics (no ``nnan``, no ``ninf``).
@@ -48,10 +50,36 @@ def jit_inline(func=None, *, fastmath=False):
     return wrap if func is None else wrap(func)
 
 
+def _renamed(func, suffix: str):
+    """A copy of ``func`` whose name (and so whose numba cache files) end in ``suffix``.
+
+    numba names its on-disk cache files after the function's qualified name and keys entries by
+    signature and bytecode, not by the ``parallel`` flag: a serial and a parallel dispatcher of
+    one Python function would share one cache entry, and a later process would load whichever
+    compiled first for both.
+    """
+    name = func.__name__ + suffix
+    names = {"co_name": name}
+    if hasattr(func.__code__, "co_qualname"):  # Python >= 3.11
+        names["co_qualname"] = func.__code__.co_qualname + suffix
+    code = func.__code__.replace(**names)
+    copy = types.FunctionType(code, func.__globals__, name, func.__defaults__, func.__closure__)
+    copy.__qualname__ = func.__qualname__ + suffix
+    copy.__kwdefaults__ = func.__kwdefaults__
+    copy.__module__ = func.__module__
+    copy.__doc__ = func.__doc__
+    return copy
+
+
 def jit_parallel(func=None, *, fastmath=False):
-    """Compile ``func`` as a parallel (``prange``) nopython kernel with the project's options."""
+    """Compile ``func`` as a parallel (``prange``) nopython kernel with the project's options.
+
+    The kernel is compiled from a renamed copy of ``func`` (suffix ``_parallel``), so that it has
+    numba cache files of its own even when ``func`` is also compiled serially with :func:`jit`.
+    """
 
     def wrap(f):
-        return numba.njit(**JIT_PARALLEL_OPTIONS, fastmath=set(fastmath) if fastmath else False)(f)
+        options = dict(JIT_PARALLEL_OPTIONS, fastmath=set(fastmath) if fastmath else False)
+        return numba.njit(**options)(_renamed(f, "_parallel"))
 
     return wrap if func is None else wrap(func)
