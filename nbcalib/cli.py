@@ -20,7 +20,15 @@ from nbcalib import __version__
 from nbcalib.errors import InputError
 
 #: Command modules in the order ``--help`` lists them (the order of the method's stages).
-COMMAND_MODULES = ("selfcheck", "synth", "calibrate", "evaluate")
+COMMAND_MODULES = (
+    "selfcheck",
+    "synth",
+    "find_matches",
+    "initial_guess",
+    "calibrate",
+    "evaluate",
+    "models",
+)
 
 EPILOG = """\
 examples:
@@ -79,6 +87,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"nbcalib {args.command}: interrupted", file=sys.stderr)
         return 130
+    except BrokenPipeError:  # `nbcalib ... | head`: the reader left; not an error of ours
+        sys.stderr.close()
+        return 0
     except Exception:
         traceback.print_exc()
         print(f"nbcalib {args.command}: internal error (a bug: please report it)", file=sys.stderr)

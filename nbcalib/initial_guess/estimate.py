@@ -1,0 +1,382 @@
+"""The initial guess from 2D-3D correspondences: rotation-only RANSAC, then robust LM.
+
+Paper section III-D: :func:`~nbcalib.initial_guess.ransac.estimate_rotation_ransac` finds the
+rotation supported by the most correspondences (translation ignored), and
+:func:`~nbcalib.initial_guess.refine.refine_pose_lm` minimises the Cauchy-robustified
+reprojection error of all correspondences over the full pose, starting from that rotation.
+
+nbcalib adds three things to the reference toolbox's procedure (measured in docs/BENCHMARKS.md;
+``candidates=1, local_optimization=False, initial_translation="zero"`` switches them off):
+
+- **candidates**: near points break the far-field assumption, so the true rotation is not always
+  RANSAC's winner; the best few distinct hypotheses are refined and the pose with the most
+  inliers after LM wins;
+- **local optimisation**: LM first fits a hypothesis's own RANSAC inliers, then all
+  correspondences, then refits the current inliers and all again while the inlier set changes
+  (the last fit is always Eq. 1 over all correspondences);
+- **start translation** ``"bearing"``: the translation that best explains the RANSAC inliers'
+  rays for the RANSAC rotation (:func:`translation_from_bearings`), instead of zero.
+
+Optional per-correspondence ``weights`` (the matcher's confidences) scale the terms of Eq. 1.
+
+The result says how far it can be trusted: the inliers after LM (reprojection error below the
+RANSAC threshold), their RMS error and ``success`` (at least ``min_inliers`` inliers).
+"""
+
+from __future__ import annotations
+
+import math
+import operator
+from dataclasses import dataclass
+
+import numpy as np
+
+from nbcalib.camera import CameraModel
+from nbcalib.errors import InputError
+from nbcalib.initial_guess.ransac import (
+    RotationRansacResult,
+    estimate_rotation_ransac,
+    usable_correspondences,
+)
+from nbcalib.initial_guess.refine import RefineResult, refine_pose_lm
+from nbcalib.transforms import make_T
+
+__all__ = [
+    "INITIAL_TRANSLATIONS",
+    "MIN_CORRESPONDENCES",
+    "InitialGuess",
+    "estimate_initial_guess",
+    "translation_from_bearings",
+]
+
+#: Start translations of the LM step (module docstring).
+INITIAL_TRANSLATIONS = ("bearing", "zero")
+
+#: Rounds of "fit the inliers, then all" after the first fit (local optimisation).
+_LO_ROUNDS = 3
+
+#: Candidates after the first are skipped once the best final inlier count is at least this
+#: many times the next candidate's RANSAC inlier count (and at least ``min_inliers``).
+_EARLY_STOP_RATIO = 3
+
+#: Fewest correspondences the estimate accepts (a pose has 6 degrees of freedom, each
+#: correspondence gives 2 equations; the reference's manual tool asks for 3 as well).
+MIN_CORRESPONDENCES = 3
+
+
+@dataclass(frozen=True)
+class InitialGuess:
+    """An initial ``T_camera_lidar`` and how well the correspondences support it.
+
+    Attributes
+    ----------
+    T_camera_lidar : ndarray of shape (4, 4), float64
+        ``p_camera = T_camera_lidar @ p_lidar``.
+    inliers : ndarray of shape (M,), bool
+        Correspondences whose final reprojection error is below ``threshold``.
+    errors : ndarray of shape (M,), float64
+        Final reprojection errors, pixels (inf where the point projects invalidly).
+    rms_px : float
+        RMS reprojection error over the inliers, pixels (NaN without inliers).
+    success : bool
+        At least ``min_inliers`` inliers: the pipeline may trust the guess.
+    threshold : float
+        Inlier threshold, pixels (the RANSAC threshold).
+    min_inliers : int
+        Inliers needed for ``success``.
+    ransac : RotationRansacResult
+        The rotation-only RANSAC step.
+    refinement : RefineResult
+        The LM step.
+    T_camera_lidar_start : ndarray of shape (4, 4), float64
+        Where LM started (for the winning candidate).
+    candidate : int
+        Rank of the winning RANSAC hypothesis among the refined ones (0: the RANSAC winner).
+    """
+
+    T_camera_lidar: np.ndarray
+    inliers: np.ndarray
+    errors: np.ndarray
+    rms_px: float
+    success: bool
+    threshold: float
+    min_inliers: int
+    ransac: RotationRansacResult
+    refinement: RefineResult
+    T_camera_lidar_start: np.ndarray
+    candidate: int
+
+    @property
+    def n_inliers(self) -> int:
+        """Number of inliers after LM."""
+        return int(np.count_nonzero(self.inliers))
+
+    @property
+    def n_correspondences(self) -> int:
+        """Number of correspondences given."""
+        return len(self.inliers)
+
+    def summary(self) -> str:
+        """One line: correspondences, RANSAC and final inliers, RMS, success."""
+        verdict = "ok" if self.success else f"FAILED (fewer than {self.min_inliers} inliers)"
+        rms = f"{self.rms_px:.2f} px" if math.isfinite(self.rms_px) else "n/a"
+        return (
+            f"{self.n_correspondences} correspondences, RANSAC inliers {self.ransac.n_inliers}, "
+            f"final inliers {self.n_inliers} (< {self.threshold:g} px), RMS {rms}: {verdict}"
+        )
+
+
+def translation_from_bearings(
+    R_camera_lidar, bearings_camera, points_lidar, *, max_norm: float | None = None
+) -> np.ndarray:
+    """Translation that best lines up rotated points with camera bearings, for a fixed rotation.
+
+    Each correspondence asks ``b_j x (R p_j + t) = 0`` (the camera-frame point lies on the
+    keypoint's ray); divided by ``|p_j|`` this is the sine of the angle between the ray and the
+    point. The least-squares ``t`` of these linear equations is returned; rays that are all
+    parallel leave ``t`` along them undetermined, and the minimum-norm solution is taken.
+
+    Parameters
+    ----------
+    R_camera_lidar : array_like of shape (3, 3)
+        Rotation of ``T_camera_lidar``.
+    bearings_camera : array_like of shape (K, 3)
+        Unit camera bearings of the keypoints.
+    points_lidar : array_like of shape (K, 3)
+        Their 3-D points in the LiDAR frame, metres (non-zero).
+    max_norm : float, optional
+        Return zero translation when the solution is longer than this (metres): an unreliable
+        solve (e.g. an outlier among few correspondences) is worse than the reference's zero.
+
+    Returns
+    -------
+    ndarray of shape (3,), float64
+        ``t`` of ``T_camera_lidar``, metres.
+    """
+    R = np.asarray(R_camera_lidar, dtype=np.float64)
+    b = np.asarray(bearings_camera, dtype=np.float64)
+    p = np.asarray(points_lidar, dtype=np.float64)
+    if len(b) < 2:
+        return np.zeros(3)
+    q = p @ R.T
+    scale = 1.0 / np.linalg.norm(p, axis=1)
+    # [b]x t = -[b]x q, each row scaled by 1 / |p|
+    bx = np.zeros((len(b), 3, 3))
+    bx[:, 0, 1], bx[:, 0, 2] = -b[:, 2], b[:, 1]
+    bx[:, 1, 0], bx[:, 1, 2] = b[:, 2], -b[:, 0]
+    bx[:, 2, 0], bx[:, 2, 1] = -b[:, 1], b[:, 0]
+    A = (bx * scale[:, None, None]).reshape(-1, 3)
+    rhs = (-np.cross(b, q) * scale[:, None]).reshape(-1)
+    t, *_ = np.linalg.lstsq(A, rhs, rcond=1e-9)
+    if not np.all(np.isfinite(t)) or (max_norm is not None and np.linalg.norm(t) > max_norm):
+        return np.zeros(3)
+    return t
+
+
+def _refine_from(
+    camera,
+    uv,
+    points,
+    bearings_camera,
+    R,
+    support,
+    *,
+    initial_translation,
+    max_initial_translation,
+    threshold,
+    robust_kernel_width,
+    local_optimization,
+    max_lm_iterations,
+    weights,
+):
+    """LM from one rotation hypothesis; returns (start pose, LM result of the last stage)."""
+    t = np.zeros(3)
+    if initial_translation == "bearing":
+        t = translation_from_bearings(
+            R, bearings_camera[support], points[support], max_norm=max_initial_translation
+        )
+    T_start = make_T(R, t)
+
+    def lm(mask, T):
+        return refine_pose_lm(
+            camera,
+            uv[mask],
+            points[mask],
+            T,
+            robust_kernel_width=robust_kernel_width,
+            weights=weights[mask],
+            max_iterations=max_lm_iterations,
+        )
+
+    everything = np.ones(len(uv), dtype=bool)
+    T = T_start
+    if local_optimization and np.count_nonzero(support) >= MIN_CORRESPONDENCES:
+        T = lm(support, T).T_camera_lidar
+    result = lm(everything, T)
+    previous = support
+    for _ in range(_LO_ROUNDS if local_optimization else 0):
+        current = result.errors < threshold
+        if np.count_nonzero(current) < MIN_CORRESPONDENCES or np.array_equal(current, previous):
+            break
+        previous = current
+        T = lm(current, result.T_camera_lidar).T_camera_lidar
+        result = lm(everything, T)
+    return T_start, result
+
+
+def estimate_initial_guess(
+    camera: CameraModel,
+    uv_camera,
+    points_lidar,
+    *,
+    ransac_iterations: int = 8192,
+    ransac_threshold: float = 5.0,
+    robust_kernel_width: float = 10.0,
+    seed: int = 0,
+    weights=None,
+    min_inliers: int = 10,
+    candidates: int = 8,
+    local_optimization: bool = True,
+    initial_translation: str = "bearing",
+    max_initial_translation: float = 2.0,
+    max_lm_iterations: int = 100,
+    parallel: bool = True,
+) -> InitialGuess:
+    """Estimate ``T_camera_lidar`` from 2D-3D correspondences (paper section III-D).
+
+    Steps: rotation-only RANSAC over all correspondences; for each of the ``candidates`` best
+    RANSAC rotations (distinct by at least 1 degree), a start translation and robust LM; the
+    candidate with the most final inliers wins (then the lower cost). Candidates are refined in
+    rank order and the rest skipped once the best pose has at least ``min_inliers`` inliers and
+    three times the RANSAC inliers of the next candidate. With
+    ``local_optimization``, LM first fits the hypothesis's own RANSAC inliers, then all
+    correspondences, and repeats (up to 3 times) "fit the current inliers, then all" while the
+    inlier set changes; the last stage always minimises paper Eq. 1 over all correspondences.
+    ``candidates=1, local_optimization=False, initial_translation="zero"`` is the reference
+    toolbox's procedure.
+
+    Parameters
+    ----------
+    camera : CameraModel
+        The real camera.
+    uv_camera : array_like of shape (M, 2)
+        Camera keypoints, pixels (u = column, v = row).
+    points_lidar : array_like of shape (M, 3)
+        Their 3-D points in the LiDAR frame, metres. Outliers are expected.
+    ransac_iterations : int, optional
+        RANSAC hypotheses.
+    ransac_threshold : float, optional
+        Inlier threshold, pixels (RANSAC and the final inlier count).
+    robust_kernel_width : float, optional
+        Cauchy kernel width of the LM step, pixels.
+    seed : int, optional
+        RANSAC seed; the same seed gives the same result.
+    weights : array_like of shape (M,), optional
+        Non-negative weight of each correspondence in the LM cost, ``sum c_j rho(s_j)``, e.g.
+        the matcher's confidences (the correct fraction of learned matches rises steeply with
+        their confidence; docs/BENCHMARKS.md). Default: all 1, paper Eq. 1. RANSAC and the
+        inlier counts do not use them.
+    min_inliers : int, optional
+        Final inliers needed for ``success``.
+    candidates : int, optional
+        RANSAC hypotheses refined by LM (the near-field parallax that rotation-only RANSAC
+        ignores can make the true rotation only the second or third best).
+    local_optimization : bool, optional
+        Refit on inlier sets before the final fit (see above).
+    initial_translation : {"bearing", "zero"}, optional
+        LM start translation (module docstring).
+    max_initial_translation : float, optional
+        A ``"bearing"`` start translation longer than this (metres) is replaced by zero.
+    max_lm_iterations : int, optional
+        Step limit of each LM run.
+    parallel : bool, optional
+        Run RANSAC on all threads (same result).
+
+    Returns
+    -------
+    InitialGuess
+
+    Raises
+    ------
+    InputError
+        Fewer than :data:`MIN_CORRESPONDENCES` usable correspondences.
+    """
+    if initial_translation not in INITIAL_TRANSLATIONS:
+        raise ValueError(
+            f"initial_translation must be one of {INITIAL_TRANSLATIONS}, "
+            f"got {initial_translation!r}"
+        )
+    min_inliers = operator.index(min_inliers)
+    candidates = operator.index(candidates)
+    if candidates < 1:
+        raise ValueError(f"candidates must be >= 1, got {candidates}")
+    bearings_camera, _, usable = usable_correspondences(camera, uv_camera, points_lidar)
+    n_usable = int(np.count_nonzero(usable))
+    if n_usable < MIN_CORRESPONDENCES:
+        raise InputError(
+            f"too few correspondences: {n_usable} usable (of {len(usable)}), "
+            f"need at least {MIN_CORRESPONDENCES}"
+        )
+    uv = np.ascontiguousarray(uv_camera, dtype=np.float64)
+    points = np.ascontiguousarray(points_lidar, dtype=np.float64)
+    if weights is None:
+        weights = np.ones(len(uv))
+    weights = np.asarray(weights, dtype=np.float64)
+    if weights.shape != (len(uv),) or not np.all(np.isfinite(weights)) or np.any(weights < 0):
+        raise ValueError(f"weights must be ({len(uv)},) finite and >= 0, got shape {weights.shape}")
+    ransac = estimate_rotation_ransac(
+        camera,
+        uv,
+        points,
+        iterations=ransac_iterations,
+        threshold=ransac_threshold,
+        seed=seed,
+        parallel=parallel,
+    )
+    hypotheses = ransac.ranked_hypotheses(candidates, min_inliers=0)
+    # LM on the usable correspondences only: the others have no valid camera ray
+    uv_u, points_u, bearings_u = uv[usable], points[usable], bearings_camera[usable]
+    best = None
+    for rank, (_, _, R) in enumerate(hypotheses):
+        support = ransac.inlier_mask(R)[usable]
+        T_start, result = _refine_from(
+            camera,
+            uv_u,
+            points_u,
+            bearings_u,
+            R,
+            support,
+            initial_translation=initial_translation,
+            max_initial_translation=max_initial_translation,
+            threshold=ransac_threshold,
+            robust_kernel_width=robust_kernel_width,
+            local_optimization=local_optimization,
+            max_lm_iterations=max_lm_iterations,
+            weights=weights[usable],
+        )
+        key = (int(np.count_nonzero(result.errors < ransac_threshold)), -result.cost)
+        if best is None or key > best[0]:
+            best = (key, rank, T_start, result)
+        # stop when the best pose explains far more than the next hypothesis could start from
+        next_count = hypotheses[rank + 1][1] if rank + 1 < len(hypotheses) else 0
+        if best[0][0] >= max(min_inliers, _EARLY_STOP_RATIO * next_count):
+            break
+    _, rank, T_start, refinement = best
+    errors = np.full(len(uv), np.inf)
+    errors[usable] = refinement.errors
+    inliers = errors < ransac_threshold
+    n_inliers = int(np.count_nonzero(inliers))
+    rms = float(np.sqrt(np.mean(errors[inliers] ** 2))) if n_inliers else math.nan
+    return InitialGuess(
+        T_camera_lidar=refinement.T_camera_lidar,
+        inliers=inliers,
+        errors=errors,
+        rms_px=rms,
+        success=n_inliers >= min_inliers,
+        threshold=float(ransac_threshold),
+        min_inliers=min_inliers,
+        ransac=ransac,
+        refinement=refinement,
+        T_camera_lidar_start=T_start,
+        candidate=rank,
+    )

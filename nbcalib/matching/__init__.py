@@ -1,0 +1,58 @@
+"""Keypoint matching between camera images and LiDAR intensity images (paper section III-D).
+
+- :func:`match_images`: the public entry point; learned matchers through onnxruntime, or the
+  SIFT fallback (:mod:`~nbcalib.matching.match`).
+- :func:`available_matchers`: what can run here, best first.
+- :class:`Matches`, :func:`read_matches_json`, :func:`write_matches_json`: the
+  ``<name>_matches.json`` file of the reference toolbox (:mod:`~nbcalib.matching.matches`).
+- :func:`draw_matches`: the side-by-side picture (:mod:`~nbcalib.matching.draw`).
+- :mod:`~nbcalib.matching.export`: torch -> ONNX (``nbcalib models export``; needs torch).
+- :mod:`~nbcalib.matching.preprocess`: image normalisations across the modality gap.
+
+Importing this package is cheap: OpenCV, onnxruntime and torch load on first use.
+
+Example
+-------
+>>> from nbcalib.matching import match_images                    # doctest: +SKIP
+>>> m = match_images(camera_grey, lidar_intensity, matcher="auto")  # doctest: +SKIP
+>>> uv_camera, uv_lidar, confidence = m.matched()                 # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import importlib
+
+_EXPORTS = {
+    "match_images": "match",
+    "available_matchers": "match",
+    "camera_scale_for": "match",
+    "pixels_per_radian": "match",
+    "resolve_matcher": "match",
+    "rotate_image": "match",
+    "unrotate_points": "match",
+    "MATCHERS": "match",
+    "Matches": "matches",
+    "read_matches_json": "matches",
+    "write_matches_json": "matches",
+    "draw_matches": "draw",
+    "LEARNED_MATCHERS": "onnx_matcher",
+    "OnnxMatcher": "onnx_matcher",
+    "default_model_dir": "onnx_matcher",
+    "model_dir": "onnx_matcher",
+    "exported_matchers": "onnx_matcher",
+    "NORMALIZATIONS": "preprocess",
+    "normalize_image": "preprocess",
+    "fill_holes": "preprocess",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(f"nbcalib.matching.{_EXPORTS[name]}"), name)
+    raise AttributeError(f"module 'nbcalib.matching' has no attribute {name!r}")
+
+
+def __dir__():
+    return __all__

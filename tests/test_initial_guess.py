@@ -1,0 +1,155 @@
+"""The initial guess end to end on synthetic correspondences, for every camera model."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from nbcalib.camera import CAMERA_MODELS, example_camera
+from nbcalib.errors import InputError
+from nbcalib.initial_guess import (
+    estimate_initial_guess,
+    synthetic_correspondences,
+    translation_from_bearings,
+)
+from nbcalib.metrics import pose_errors
+from nbcalib.synthetic import default_T_camera_lidar
+from nbcalib.transforms import invert_T, make_T, so3_exp, transform_points
+
+#: the paper's success criterion for an initial guess
+MAX_ROTATION_DEG = 1.0
+MAX_TRANSLATION_M = 0.5
+
+R_OPTICAL_BODY = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
+
+
+def _camera_looking(yaw_deg: float, t_lidar_camera=(0.1, -0.15, 0.05)) -> np.ndarray:
+    """T_camera_lidar of a camera at t looking along LiDAR yaw (0 forward, 180 backwards)."""
+    R_lidar_camera = so3_exp(np.array([0.0, 0.0, math.radians(yaw_deg)])) @ R_OPTICAL_BODY.T
+    return invert_T(make_T(R_lidar_camera, np.array(t_lidar_camera)))
+
+
+def _assert_success(guess, truth):
+    err = pose_errors(guess.T_camera_lidar, truth)
+    assert err["rotation_error_deg"] < MAX_ROTATION_DEG, err
+    assert err["translation_error_m"] < MAX_TRANSLATION_M, err
+    assert guess.success
+
+
+@pytest.mark.parametrize("model", CAMERA_MODELS)
+def test_every_camera_model_with_80_percent_outliers(model):
+    camera = example_camera(model, 640, 480)
+    truth = default_T_camera_lidar("spinning", 7)
+    c = synthetic_correspondences(camera, truth, 3, n_inliers=60, outlier_fraction=0.8)
+    guess = estimate_initial_guess(camera, c.uv_camera, c.points_lidar, ransac_iterations=4096)
+    _assert_success(guess, truth)
+    # the inliers found are true correspondences, and most true ones are found
+    assert np.mean(c.is_inlier[guess.inliers]) > 0.95
+    assert np.mean(guess.inliers[c.is_inlier]) > 0.8
+    assert guess.rms_px < 3.0
+
+
+@pytest.mark.parametrize(
+    ("model", "yaw"), [("fisheye", 90.0), ("omnidir", -120.0), ("equirectangular", 180.0)]
+)
+def test_wide_cameras_looking_sideways_or_backwards(model, yaw):
+    camera = example_camera(model, 640, 480)
+    truth = _camera_looking(yaw)
+    c = synthetic_correspondences(camera, truth, 5, n_inliers=50, outlier_fraction=0.85)
+    guess = estimate_initial_guess(camera, c.uv_camera, c.points_lidar, ransac_iterations=4096)
+    _assert_success(guess, truth)
+
+
+def test_same_seed_same_answer_and_reference_procedure():
+    camera = example_camera("plumb_bob", 640, 480)
+    truth = default_T_camera_lidar("spinning", 2)
+    c = synthetic_correspondences(camera, truth, 1, n_inliers=80, outlier_fraction=0.7)
+    a = estimate_initial_guess(camera, c.uv_camera, c.points_lidar, seed=4)
+    b = estimate_initial_guess(camera, c.uv_camera, c.points_lidar, seed=4, parallel=False)
+    assert np.array_equal(a.T_camera_lidar, b.T_camera_lidar)
+    ref = estimate_initial_guess(
+        camera,
+        c.uv_camera,
+        c.points_lidar,
+        seed=4,
+        candidates=1,
+        local_optimization=False,
+        initial_translation="zero",
+    )
+    assert np.array_equal(ref.T_camera_lidar_start[:3, 3], np.zeros(3))
+    assert ref.candidate == 0
+    _assert_success(ref, truth)
+
+
+def test_confidence_weights_favour_confident_matches():
+    camera = example_camera("pinhole", 640, 480)
+    truth = _camera_looking(-40.0)
+    c = synthetic_correspondences(camera, truth, 8, n_inliers=60, outlier_fraction=0.6)
+    uv = c.uv_camera.copy()
+    # a coherent bias: 30 of the outliers are a shifted copy of true correspondences
+    fakes = np.flatnonzero(~c.is_inlier)[:30]
+    donors = np.flatnonzero(c.is_inlier)[:30]
+    uv[fakes] = uv[donors] + [6.0, 0.0]
+    points = c.points_lidar.copy()
+    points[fakes] = points[donors]
+    confidence = np.where(c.is_inlier, 0.9, 0.05)
+    weighted = estimate_initial_guess(camera, uv, points, weights=confidence)
+    plain = estimate_initial_guess(camera, uv, points)
+    _assert_success(weighted, truth)
+    # the biased copies pull the unweighted pose half-way (a few pixels); weighted, they hardly do
+    err_w = pose_errors(weighted.T_camera_lidar, truth)["rotation_error_deg"]
+    err_p = pose_errors(plain.T_camera_lidar, truth)["rotation_error_deg"]
+    assert err_w < 0.5 * err_p
+    assert np.mean(weighted.errors[donors]) < 0.7 * np.mean(plain.errors[donors])
+    with pytest.raises(ValueError, match="weights"):
+        estimate_initial_guess(camera, uv, points, weights=np.ones(3))
+
+
+def test_pure_outliers_are_flagged_as_failure(rng):
+    camera = example_camera("pinhole", 640, 480)
+    uv = rng.uniform([0, 0], [639, 479], (300, 2))
+    points = rng.normal(size=(300, 3)) * 10.0
+    guess = estimate_initial_guess(camera, uv, points, ransac_iterations=2000)
+    assert not guess.success and guess.n_inliers < guess.min_inliers
+    assert "FAILED" in guess.summary()
+
+
+def test_points_behind_the_camera_count_as_outliers():
+    camera = example_camera("plumb_bob", 640, 480)
+    truth = _camera_looking(0.0)
+    c = synthetic_correspondences(camera, truth, 2, n_inliers=60, outlier_fraction=0.5)
+    # mirror some outliers' points through the LiDAR: they are behind the camera
+    points = c.points_lidar.copy()
+    mirrored = np.flatnonzero(~c.is_inlier)[:20]
+    points[mirrored] = -points[mirrored]
+    guess = estimate_initial_guess(camera, c.uv_camera, points)
+    _assert_success(guess, truth)
+    p_camera = transform_points(guess.T_camera_lidar, points)
+    assert not guess.inliers[p_camera[:, 2] <= 0].any()
+    assert np.all(np.isinf(guess.errors[p_camera[:, 2] <= 0]))
+
+
+def test_translation_from_bearings_is_exact_for_exact_rays(rng):
+    camera = example_camera("pinhole", 640, 480)
+    truth = _camera_looking(30.0)
+    c = synthetic_correspondences(
+        camera, truth, rng, n_inliers=20, outlier_fraction=0.0, noise_px=0.0, range_m=(1.0, 5.0)
+    )
+    t = translation_from_bearings(truth[:3, :3], camera.unproject(c.uv_camera), c.points_lidar)
+    np.testing.assert_allclose(t, truth[:3, 3], atol=1e-9)
+    far = translation_from_bearings(
+        truth[:3, :3], camera.unproject(c.uv_camera), c.points_lidar, max_norm=0.01
+    )
+    assert np.array_equal(far, np.zeros(3))
+
+
+def test_too_few_correspondences():
+    camera = example_camera("pinhole", 64, 48)
+    with pytest.raises(InputError, match="too few correspondences"):
+        estimate_initial_guess(camera, [[1.0, 2.0], [3.0, 4.0]], [[5.0, 0, 0], [6.0, 1, 0]])
+    with pytest.raises(ValueError, match="initial_translation"):
+        estimate_initial_guess(
+            camera, np.zeros((3, 2)), np.ones((3, 3)), initial_translation="guess"
+        )
