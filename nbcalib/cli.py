@@ -23,6 +23,7 @@ from nbcalib.errors import InputError
 COMMAND_MODULES = (
     "selfcheck",
     "synth",
+    "preprocess",
     "find_matches",
     "initial_guess",
     "calibrate",
