@@ -17,7 +17,7 @@ Pairs:
 Run (a few minutes per matcher; the learned matchers need ``nbcalib models export`` first)::
 
     python benchmarks/bench_matching.py --model-dir ~/.cache/nbcalib/models \\
-        --out /tmp/bench_matching.json
+        --out bench_matching.json
 
 Prints a Markdown table (the one in docs/BENCHMARKS.md, "Matching").
 """

@@ -1,6 +1,6 @@
 """The work directory: one calibration job's files, shared with the reference toolbox.
 
-Layout (docs: /work/shared/spec/cli.md, reference_toolbox.md section 1.1), one set of products per
+Layout (the nbcalib CLI contract and the reference toolbox, section 1.1), one set of products per
 data name ``<name>`` (a bag's file or folder name, or ``000000`` for plain files)::
 
     WORKDIR/
