@@ -58,8 +58,19 @@ def test_hard_histogram_matches_reference(model, rng):
     image_bins = rng.integers(0, 16, (cam.height, cam.width)).astype(np.uint8)
     T = se3_exp(np.array([0.01, -0.02, 0.03, 0.01, 0.02, -0.01]))
     expected = ref.joint_histogram_hard(cam, T, pts, point_bins, image_bins, 16)
-    for kernel in (k._joint_hist_hard, k._joint_hist_hard_parallel):
-        got = kernel(cam.model_id, cam.params, T, pts, point_bins, image_bins, 16, k.N_CHUNKS)
+    cells = np.empty(len(pts), dtype=np.int32)
+    for parallel in (False, True):
+        got = k.joint_hist_hard(
+            cam.model_id,
+            cam.params,
+            T,
+            pts,
+            point_bins,
+            image_bins,
+            16,
+            parallel=parallel,
+            cells=cells,
+        )
         assert np.array_equal(got, expected)
 
 

@@ -124,6 +124,7 @@ class NIDCost:
         self.points = np.ascontiguousarray(pts[finite])
         self.point_bins = quantise(inten[finite], self.bins)
         self.image_bins = quantise(img, self.bins)
+        self._cells = np.empty(self.points.shape[0], dtype=np.int32)  # hard form's pass-1 buffer
 
     def __len__(self) -> int:
         return self.points.shape[0]
@@ -137,8 +138,7 @@ class NIDCost:
         if self.form == "hard":
             if grad:
                 raise ValueError("the hard-binned NID is piecewise constant: it has no gradient")
-            kernel = _k._joint_hist_hard_parallel if self.parallel else _k._joint_hist_hard
-            hist = kernel(
+            hist = _k.joint_hist_hard(
                 cam.model_id,
                 cam.params,
                 T,
@@ -146,7 +146,8 @@ class NIDCost:
                 self.point_bins,
                 self.image_bins,
                 self.bins,
-                _k.N_CHUNKS,
+                parallel=self.parallel,
+                cells=self._cells,
             ).astype(np.float64)
             n_in = int(hist.sum())
             value, _ = _k._nid_from_hist(hist, np.zeros((self.bins, self.bins, 6)), False)
