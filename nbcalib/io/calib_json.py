@@ -44,8 +44,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import stat
-import uuid
 from dataclasses import dataclass, field
 from datetime import datetime, timedelta, timezone
 from pathlib import Path
@@ -54,6 +52,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from nbcalib.errors import InputError
+from nbcalib.io._files import write_text_atomic
 from nbcalib.transforms import invert_T, pose_from_xyz_quat, pose_to_xyz_quat
 
 if TYPE_CHECKING:
@@ -453,28 +452,6 @@ def write_json(path: str | os.PathLike, data: Any) -> None:
         data, indent=2, sort_keys=True, ensure_ascii=False, allow_nan=False, default=_to_json
     )
     write_text_atomic(path, text + "\n")
-
-
-def write_text_atomic(path: str | os.PathLike, text: str) -> None:
-    """Replace ``path`` with ``text`` (UTF-8) so that readers see the old or the new file, whole.
-
-    The text goes to a temporary file in the same directory, is flushed to disk, and then
-    renamed over ``path`` with :func:`os.replace`. An existing file's permissions are kept.
-    """
-    path = Path(path)
-    tmp = path.with_name(f".{path.name}.{uuid.uuid4().hex[:12]}.tmp")
-    fd = os.open(tmp, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o666)
-    try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="\n") as stream:
-            stream.write(text)
-            stream.flush()
-            os.fsync(stream.fileno())
-        if path.exists():
-            os.chmod(tmp, stat.S_IMODE(path.stat().st_mode))
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
 
 
 def read_image_size(path: str | os.PathLike) -> tuple[int, int]:

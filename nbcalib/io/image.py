@@ -139,7 +139,7 @@ def write_png(path, image: np.ndarray) -> None:
     """
     import cv2
 
-    from nbcalib.io.pointcloud import write_bytes_atomic
+    from nbcalib.io._files import write_bytes_atomic
 
     image = np.asarray(image)
     if image.dtype not in (np.uint8, np.uint16):

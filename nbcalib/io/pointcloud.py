@@ -22,9 +22,7 @@ beside the target and rename it into place, so a crash never leaves a file that 
 from __future__ import annotations
 
 import io
-import os
 import re
-import uuid
 import warnings
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
@@ -33,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from nbcalib.errors import InputError
+from nbcalib.io._files import write_bytes_atomic
 
 #: Suffixes that :func:`read_pointcloud` understands.
 POINTCLOUD_SUFFIXES = (".pcd", ".ply", ".bin", ".npy", ".npz")
@@ -314,25 +313,6 @@ def _read_bytes(path: Path) -> bytes:
     if not data:
         raise InputError("empty file", path=path)
     return data
-
-
-def write_bytes_atomic(path, parts: Iterable[bytes | memoryview | np.ndarray]) -> None:
-    """Write ``parts`` to ``path`` through a temporary file in the same folder and a rename.
-
-    A reader never sees a half-written file: the target either keeps its old content or gets the
-    complete new one.
-    """
-    path = Path(path)
-    # a unique sibling name, opened exclusively; unlike mkstemp it keeps the umask's permissions
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.{uuid.uuid4().hex[:12]}.tmp")
-    try:
-        with open(tmp, "xb") as f:
-            for part in parts:
-                f.write(part)
-        os.replace(tmp, path)
-    except BaseException:
-        tmp.unlink(missing_ok=True)
-        raise
 
 
 # ----------------------------------------------------------------------------------------------

@@ -39,6 +39,7 @@ import types
 from pathlib import Path
 
 from nbcalib.errors import InputError
+from nbcalib.io._files import write_text_atomic
 from nbcalib.matching.onnx_matcher import (
     FORMAT_VERSION,
     LEARNED_MATCHERS,
@@ -562,9 +563,7 @@ def export_models(
             },
             "exported": datetime.datetime.now(datetime.timezone.utc).isoformat(timespec="seconds"),
         }
-        tmp = folder / (MANIFEST + ".tmp")
-        tmp.write_text(json.dumps(manifest, indent=2, sort_keys=True) + "\n")
-        os.replace(tmp, folder / MANIFEST)
+        write_text_atomic(folder / MANIFEST, json.dumps(manifest, indent=2, sort_keys=True) + "\n")
         log.info("exported %s to %s in %.0f s", name, folder, time.perf_counter() - t0)
         written.append(folder)
     return written

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from nbcalib.errors import InputError
+from nbcalib.io._files import write_text_atomic
 
 __all__ = ["Matches", "read_matches_json", "write_matches_json"]
 
@@ -108,9 +109,7 @@ def write_matches_json(path: str | os.PathLike, matches: Matches) -> None:
         "confidence": [float(x) for x in matches.confidence],
         "nbcalib": {"matcher": matches.matcher, **matches.info},
     }
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(json.dumps(doc, indent=2, sort_keys=True) + "\n")
-    os.replace(tmp, path)
+    write_text_atomic(path, json.dumps(doc, indent=2, sort_keys=True) + "\n")
 
 
 def read_matches_json(path: str | os.PathLike) -> Matches:

@@ -105,7 +105,7 @@ def write_index_map(path, index) -> None:
     """Write an index map as the reference's 4-channel 8-bit PNG, atomically."""
     import cv2
 
-    from nbcalib.io.pointcloud import write_bytes_atomic
+    from nbcalib.io._files import write_bytes_atomic
 
     ok, encoded = cv2.imencode(".png", encode_index_map(index))
     if not ok:  # pragma: no cover - OpenCV encodes every (H, W, 4) uint8 image

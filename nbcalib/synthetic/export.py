@@ -20,13 +20,13 @@ PCD and PointCloud2 fields: ``x, y, z`` float32 (metres, LiDAR frame at the poin
 from __future__ import annotations
 
 import json
-import os
 from collections.abc import Callable
 from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
 
+from nbcalib.io._files import write_text_atomic
 from nbcalib.synthetic.lidar import LidarScan
 from nbcalib.synthetic.rig import RigConfig, SyntheticSequence, generate_sequence
 from nbcalib.transforms import pose_to_xyz_quat
@@ -238,9 +238,7 @@ def export_dataset(
         camera = sequence.camera
     save_camera(out_dir / "camera.yaml", camera)
     truth = ground_truth_dict(config, infos, T_camera_lidar)
-    tmp = truth_path.with_name(f".{truth_path.name}.tmp")
-    tmp.write_text(json.dumps(truth, indent=2, sort_keys=True) + "\n")
-    os.replace(tmp, truth_path)
+    write_text_atomic(truth_path, json.dumps(truth, indent=2, sort_keys=True) + "\n")
     return truth
 
 
