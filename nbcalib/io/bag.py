@@ -356,7 +356,7 @@ class Bag:
         ``p_parent = T_parent_child @ p_child`` (ROS's transform from ``header.frame_id`` to
         ``child_frame_id``). An empty list when the bag has no such topic.
         """
-        from scipy.spatial.transform import Rotation
+        from nbcalib.transforms import quat_xyzw_to_matrix
 
         if topic not in self.topics:
             return []
@@ -366,7 +366,7 @@ class Bag:
             for tf in msg.transforms:
                 q, t = tf.transform.rotation, tf.transform.translation
                 T = np.eye(4)
-                T[:3, :3] = Rotation.from_quat([q.x, q.y, q.z, q.w]).as_matrix()
+                T[:3, :3] = quat_xyzw_to_matrix([q.x, q.y, q.z, q.w])
                 T[:3, 3] = [t.x, t.y, t.z]
                 transforms.append((tf.header.frame_id, tf.child_frame_id, T))
         return transforms
@@ -1010,12 +1010,12 @@ class BagWriter:
             translation and quaternion (x, y, z, w), ROS's transform from ``parent_frame``
             (header) to ``child_frame``.
         """
-        from scipy.spatial.transform import Rotation
+        from nbcalib.transforms import matrix_to_quat_xyzw
 
         T = np.asarray(T_parent_child, dtype=np.float64)
         if T.shape != (4, 4) or not np.isfinite(T).all():
             raise ValueError(f"T_parent_child must be a finite 4 x 4 matrix, got shape {T.shape}")
-        qx, qy, qz, qw = Rotation.from_matrix(T[:3, :3]).as_quat()
+        qx, qy, qz, qw = (float(c) for c in matrix_to_quat_xyzw(T[:3, :3]))
         transform = self._msg(
             "geometry_msgs/msg/Transform",
             translation=self._msg("geometry_msgs/msg/Vector3", x=T[0, 3], y=T[1, 3], z=T[2, 3]),
