@@ -124,9 +124,13 @@ def _joint_hist_smooth_impl(
             xc = T[0, 0] * x + T[0, 1] * y + T[0, 2] * z + T[0, 3]
             yc = T[1, 0] * x + T[1, 1] * y + T[1, 2] * z + T[1, 3]
             zc = T[2, 0] * x + T[2, 1] * y + T[2, 2] * z + T[2, 3]
-            u, v, j00, j01, j02, j10, j11, j12, ok = project_point_jacobian(
-                model_id, params, xc, yc, zc
-            )
+            if want_grad:
+                u, v, j00, j01, j02, j10, j11, j12, ok = project_point_jacobian(
+                    model_id, params, xc, yc, zc
+                )
+            else:  # value only: the inlined projection, no Jacobian (same pixels, tested)
+                u, v, ok = project_point(model_id, params, xc, yc, zc)
+                j00 = j01 = j02 = j10 = j11 = j12 = 0.0
             if not ok:
                 continue
             if not (u >= -0.5 and u < width - 0.5 and v >= -0.5 and v < height - 0.5):
