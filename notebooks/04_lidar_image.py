@@ -1,0 +1,131 @@
+# ---
+# jupyter:
+#   jupytext:
+#     formats: py:percent
+#   kernelspec:
+#     display_name: Python 3
+#     language: python
+#     name: python3
+# ---
+
+# %% [markdown]
+# # 4. The LiDAR image: a virtual camera looks at the dense cloud
+#
+# Keypoint matchers work on images, so the method (paper section III-D) renders the dense cloud
+# into a *LiDAR intensity image* with a virtual camera at the LiDAR's origin. Next to each
+# pixel's intensity it keeps the *index* of the point that pixel shows (a z-buffer keeps the
+# nearest one): a keypoint found in the LiDAR image then has a 3D point, which is what the
+# initial guess needs (2D in the camera image <-> 3D in the LiDAR frame).
+#
+# 1. Estimate the LiDAR's field of view from its points.
+# 2. Pick the virtual camera: pinhole below 150 degrees, equirectangular above.
+# 3. Equalise intensities (their raw scale means nothing to the camera).
+# 4. Render: intensity image + index map (-1 where no point falls).
+
+# %%
+import os
+
+import matplotlib.pyplot as plt
+import numpy as np
+
+from nbcalib.preprocess.intensity import equalize_image, equalize_point_intensities
+from nbcalib.preprocess.lidar_image import (
+    estimate_lidar_fov,
+    make_virtual_camera,
+    render_lidar_image,
+)
+from nbcalib.synthetic import RigConfig, generate_sequence
+
+QUICK = os.environ.get("NBCALIB_NOTEBOOK_QUICK") == "1"
+
+# %% [markdown]
+# Two LiDARs of the synthetic rig: a 360-degree spinning one (deskewed with the true motion,
+# as notebook 3 would give) and a Livox-like rosette with a 70-degree cone, held still.
+
+# %%
+duration = 0.3 if QUICK else 1.0
+clouds = {}
+for lidar in ("spinning64", "livox"):
+    seq = generate_sequence(
+        RigConfig(lidar=lidar, scene="street", seed=2, duration=duration, image_size=(640, 480))
+    )
+    clouds[lidar] = seq.dense_cloud()
+    print(f"{lidar:11s} {len(clouds[lidar][0]):,} points")
+
+# %% [markdown]
+# ## Field of view and virtual camera
+#
+# The field of view is the largest angle between the directions of two points. A spinning LiDAR
+# sees all around (the largest angle is about 180 degrees), so it gets an equirectangular image
+# of 1920 x 960 pixels; the Livox a pinhole camera of 1024 x 1024 looking along its x axis.
+
+# %%
+virtual = {}
+for lidar, (points, _) in clouds.items():
+    fov = estimate_lidar_fov(points)
+    camera, T_vcam_lidar = make_virtual_camera(fov)
+    virtual[lidar] = (camera, T_vcam_lidar)
+    size = f"{camera.width}x{camera.height}"
+    print(f"{lidar:11s} FOV {np.degrees(fov):6.1f} deg -> {camera.model} {size}")
+
+# %% [markdown]
+# ## Equalise, render, look
+#
+# Rank equalisation spreads the intensities uniformly over [0, 1]. The index map holds, per
+# pixel, the row of the point it shows.
+
+# %%
+fig, axes = plt.subplots(2, 2, figsize=(16, 9), gridspec_kw={"width_ratios": [2, 1]})
+renders = {}
+for row, (lidar, (points, intensities)) in enumerate(clouds.items()):
+    camera, T_vcam_lidar = virtual[lidar]
+    image = render_lidar_image(
+        camera, T_vcam_lidar, points, equalize_point_intensities(intensities)
+    )
+    renders[lidar] = image
+    axes[row, 0].imshow(image.intensity, cmap="gray")
+    axes[row, 0].set_title(f"{lidar}: LiDAR intensity ({image.filled.mean():.0%} of pixels filled)")
+    axes[row, 1].imshow(np.where(image.filled, image.depth, np.nan), cmap="turbo")
+    axes[row, 1].set_title("range of the nearest point per pixel")
+fig.tight_layout()
+
+# %% [markdown]
+# ## From a pixel back to a 3D point
+#
+# Pick any filled pixel of the Livox image: the index map names the point, and projecting that
+# point with the virtual camera lands on the same pixel (nearest pixel = `floor(u + 0.5)`).
+
+# %%
+camera, T_vcam_lidar = virtual["livox"]
+image = renders["livox"]
+points = clouds["livox"][0]
+rows, cols = np.nonzero(image.filled)
+v, u = rows[len(rows) // 2], cols[len(cols) // 2]
+index = image.index[v, u]
+p = points[index]
+uv, _ = camera.project(p @ T_vcam_lidar[:3, :3].T)
+print(
+    f"pixel ({u}, {v}) shows point {index} at {np.round(p, 3)} m -> projects to {np.round(uv, 2)}"
+)
+
+# %% [markdown]
+# ## The camera side
+#
+# The camera image is equalised the same way (`equalize_image`), so both images use their full
+# grey range before matching.
+
+# %%
+camera_image = equalize_image(seq.image)
+fig, axes = plt.subplots(1, 2, figsize=(14, 5))
+axes[0].imshow(seq.image, cmap="gray")
+axes[0].set_title("camera image as taken")
+axes[1].imshow(camera_image, cmap="gray")
+axes[1].set_title("equalised")
+fig.tight_layout()
+
+# %% [markdown]
+# `nbcalib preprocess` writes exactly these products into the work directory:
+# `<name>_lidar_intensities.png` and `<name>_lidar_indices.png` (the int32 index map packed
+# into a 4-channel PNG), as the reference toolbox does.
+#
+# Next: [05_initial_guess](05_initial_guess.py), matching the two images.
