@@ -1,9 +1,15 @@
 """Speed of the NID cost: 1 M LiDAR points against a 2 MP image, serial and parallel kernels,
 and the same hard-binned cost in NumPy in the same process for the ratio.
 
+Each cost runs twice: with the points in random order (the headline figures) and sorted by their
+pixel (``*_pixel_order``, the order :func:`nbcalib.preprocess.lidar_image.visible_indices` gives),
+since the kernels' speed depends on how the image is read. Wall clock and process CPU time (all
+threads) are printed side by side with the load average.
+
 Run:  python benchmarks/bench_nid.py [--points 1000000] [--width 1920 --height 1080] [--repeat 5]
 The last line printed is one JSON object with points_per_s (hard-binned value, best kernel),
-grad_points_per_s (smooth value + gradient, best kernel) and numpy_ratio.
+grad_points_per_s (smooth value + gradient, best kernel) and numpy_ratio, the same with suffix
+_pixel_order, the load average and every row (points/s from wall time; ``*_cpu_s`` seconds).
 """
 
 from __future__ import annotations
@@ -25,13 +31,15 @@ from nbcalib.transforms import se3_exp
 
 
 def best_time(fn, repeat):
+    """Best wall-clock and best CPU (process, all threads) seconds of ``repeat`` runs."""
     fn()  # warm up (compilation, caches)
-    times = []
+    wall, cpu = [], []
     for _ in range(repeat):
-        t0 = time.perf_counter()
+        t0, c0 = time.perf_counter(), time.process_time()
         fn()
-        times.append(time.perf_counter() - t0)
-    return min(times)
+        wall.append(time.perf_counter() - t0)
+        cpu.append(time.process_time() - c0)
+    return min(wall), min(cpu)
 
 
 def main():
@@ -55,52 +63,57 @@ def main():
     intensities = rng.random(args.points)
     T = se3_exp(np.array([0.01, -0.02, 0.01, 0.002, 0.003, -0.001]))
     n = args.points
+    # the same points sorted by their pixel (what nbcalib.preprocess.lidar_image.visible_indices
+    # returns): the image is then read in memory order
+    pixel_order = np.lexsort((np.floor(uv[:, 0] + 0.5), np.floor(uv[:, 1] + 0.5)))
 
-    rows = {}
-    for parallel in (False, True):
-        tag = "parallel" if parallel else "serial"
-        hard = NIDCost(cam, image, points, intensities, form="hard", parallel=parallel)
-        smooth = NIDCost(cam, image, points, intensities, form="smooth", parallel=parallel)
-        rows[f"hard_value_{tag}"] = n / best_time(lambda c=hard: c.value(T), args.repeat)
-        rows[f"smooth_value_{tag}"] = n / best_time(lambda c=smooth: c.value(T), args.repeat)
-        rows[f"smooth_value_grad_{tag}"] = n / best_time(
-            lambda c=smooth: c.value_and_grad(T), args.repeat
-        )
-    numpy_t = best_time(
-        lambda: ref.nid_hard_numpy(
-            cam.model,
-            cam.intrinsics,
-            cam.distortion_coeffs,
-            T,
-            hard.points,
-            hard.point_bins,
-            hard.image_bins,
-            hard.bins,
-        ),
-        max(1, args.repeat // 2),
-    )
-    assert (
-        abs(
-            ref.nid_hard_numpy(
+    rows = {}  # name -> (wall s, cpu s)
+    load_before = os.getloadavg()[0]
+    for order_name, order in (("", np.arange(n)), ("_pixel_order", pixel_order)):
+        pts, inten = points[order], intensities[order]
+        for parallel in (False, True):
+            tag = ("parallel" if parallel else "serial") + order_name
+            hard = NIDCost(cam, image, pts, inten, form="hard", parallel=parallel)
+            smooth = NIDCost(cam, image, pts, inten, form="smooth", parallel=parallel)
+            rows[f"hard_value_{tag}"] = best_time(lambda c=hard: c.value(T), args.repeat)
+            rows[f"smooth_value_{tag}"] = best_time(lambda c=smooth: c.value(T), args.repeat)
+            rows[f"smooth_value_grad_{tag}"] = best_time(
+                lambda c=smooth: c.value_and_grad(T), args.repeat
+            )
+
+        def numpy_cost(c=hard):
+            return ref.nid_hard_numpy(
                 cam.model,
                 cam.intrinsics,
                 cam.distortion_coeffs,
                 T,
-                hard.points,
-                hard.point_bins,
-                hard.image_bins,
-                hard.bins,
+                c.points,
+                c.point_bins,
+                c.image_bins,
+                c.bins,
             )
-            - hard.value(T)
-        )
-        < 1e-12
+
+        assert abs(numpy_cost() - hard.value(T)) < 1e-12
+        rows[f"hard_value_numpy{order_name}"] = best_time(numpy_cost, max(1, args.repeat // 2))
+    load_after = os.getloadavg()[0]
+
+    rate = {k: n / wall for k, (wall, _) in rows.items()}
+    best_hard = max(rate["hard_value_serial"], rate["hard_value_parallel"])
+    best_grad = max(rate["smooth_value_grad_serial"], rate["smooth_value_grad_parallel"])
+    best_hard_sorted = max(
+        rate["hard_value_serial_pixel_order"], rate["hard_value_parallel_pixel_order"]
     )
-    rows["hard_value_numpy"] = n / numpy_t
-    best_hard = max(rows["hard_value_serial"], rows["hard_value_parallel"])
-    best_grad = max(rows["smooth_value_grad_serial"], rows["smooth_value_grad_parallel"])
-    print(f"{'variant':<28} {'M points/s':>10}")
-    for k, v in rows.items():
-        print(f"{k:<28} {v / 1e6:10.1f}")
+    best_grad_sorted = max(
+        rate["smooth_value_grad_serial_pixel_order"],
+        rate["smooth_value_grad_parallel_pixel_order"],
+    )
+    print(f"load average {load_before:.2f} before, {load_after:.2f} after")
+    print(f"{'variant':<44} {'M points/s':>10} {'wall ms':>8} {'cpu ms':>8} {'M/cpu-s':>8}")
+    for k, (wall, cpu) in rows.items():
+        print(
+            f"{k:<44} {n / wall / 1e6:10.1f} {wall * 1e3:8.1f} {cpu * 1e3:8.1f} "
+            f"{n / cpu / 1e6:8.1f}"
+        )
     result = {
         "points": n,
         "image": f"{args.width}x{args.height}",
@@ -108,10 +121,17 @@ def main():
         "threads": numba.get_num_threads(),
         "cpu_count": os.cpu_count(),
         "machine": platform.machine(),
+        "load_average": [round(load_before, 2), round(load_after, 2)],
         "points_per_s": round(best_hard),
         "grad_points_per_s": round(best_grad),
-        "numpy_ratio": round(best_hard / rows["hard_value_numpy"], 1),
-        **{k: round(v) for k, v in rows.items()},
+        "numpy_ratio": round(best_hard / rate["hard_value_numpy"], 1),
+        "points_per_s_pixel_order": round(best_hard_sorted),
+        "grad_points_per_s_pixel_order": round(best_grad_sorted),
+        "numpy_ratio_pixel_order": round(
+            best_hard_sorted / rate["hard_value_numpy_pixel_order"], 1
+        ),
+        **{k: round(v) for k, v in rate.items()},
+        **{f"{k}_cpu_s": round(cpu, 4) for k, (_, cpu) in rows.items()},
     }
     print(json.dumps(result))
 

@@ -89,6 +89,51 @@ def test_smooth_histogram_matches_reference(model, rng):
     assert_allclose(hist.sum(), count, rtol=1e-12)  # B-spline weights are a partition of unity
 
 
+def blocky_bins(rng, height, width, bins, block=6):
+    """Image bins constant over ``block`` x ``block`` tiles: many 4 x 4 patches fall in one bin."""
+    tiles = rng.integers(0, bins, (-(-height // block), -(-width // block))).astype(np.uint8)
+    return np.ascontiguousarray(np.kron(tiles, np.ones((block, block), np.uint8))[:height, :width])
+
+
+@pytest.mark.parametrize("model", ["plumb_bob", "fisheye", "omnidir", "equirectangular"])
+@pytest.mark.parametrize("image_kind", ["random", "blocky"])
+def test_smooth_derivative_matches_reference(model, image_kind, rng):
+    cam = example_camera(model, 160, 120 if model != "equirectangular" else 80)
+    pts = nasty_points(cam, rng, n=800)
+    point_bins = rng.integers(0, 8, len(pts)).astype(np.uint8)
+    if image_kind == "random":
+        image_bins = rng.integers(0, 8, (cam.height, cam.width)).astype(np.uint8)
+    else:
+        image_bins = blocky_bins(rng, cam.height, cam.width, 8)
+    T = se3_exp(np.array([0.01, -0.02, 0.03, 0.01, 0.02, -0.01]))
+    expected = ref.joint_histogram_smooth(cam, T, pts, point_bins, image_bins, 8)
+    expected_d = ref.joint_histogram_smooth_derivative(cam, T, pts, point_bins, image_bins, 8)
+    for kernel in (k._joint_hist_smooth, k._joint_hist_smooth_parallel):
+        hist, dhist, count = kernel(
+            cam.model_id, cam.params, T, pts, point_bins, image_bins, 8, k.N_CHUNKS, True
+        )
+        assert_allclose(hist, expected, **TOL["kernel_vs_reference"])
+        scale = np.abs(expected_d).max()
+        assert scale > 0
+        assert_allclose(
+            dhist / scale, expected_d / scale, **TOL["nid_derivative_vs_reference_scaled"]
+        )
+        assert count == round(expected.sum())
+    if image_kind == "blocky":  # the one-bin shortcut must have been taken for many points
+        uv, valid = cam.project(pts @ T[:3, :3].T + T[:3, 3], in_image=True)
+        ku, kv = np.floor(uv[valid]).astype(int).T
+        one_bin = [
+            np.ptp(
+                image_bins[np.clip(np.arange(v - 1, v + 3), 0, cam.height - 1)][
+                    :, np.clip(np.arange(u - 1, u + 3), 0, cam.width - 1)
+                ]
+            )
+            == 0
+            for u, v in zip(ku, kv)
+        ]
+        assert np.mean(one_bin) > 0.2
+
+
 def test_parallel_equals_serial_bit_for_bit(rng):
     cam = example_camera("plumb_bob", 320, 240)
     for seed in range(5):
@@ -242,3 +287,26 @@ def test_bad_input(rng):
         NIDCost(cam, img, pts, pts[:, 0]).value(np.eye(3))
     with pytest.raises(ValueError, match=r"\[0, 1\]"):
         NIDCost(cam, img * 2, pts, pts[:, 0])
+
+
+def test_visible_indices_are_the_visible_points_in_pixel_order(rng):
+    """The cache-friendly order of hidden-point removal changes no NID beyond rounding."""
+    from nbcalib.preprocess.lidar_image import visible_indices, visible_mask
+
+    cam = example_camera("plumb_bob", 320, 240)
+    image, pts, inten = textured_scene(cam, rng, n=3000)
+    pts = np.concatenate([pts, pts[:500] * 1.5, [[np.nan, 0, 1], [0, 0, -2]]])  # occluded, bad
+    inten = np.concatenate([inten, inten[:500], [0.5, 0.5]])
+    T = se3_exp(np.array([0.002, -0.003, 0.001, 0.001, -0.0015, 0.0005]))
+    mask = visible_mask(cam, T, pts, window=1)
+    idx = visible_indices(cam, T, pts, window=1)
+    assert 0 < idx.size < len(pts)
+    assert np.array_equal(np.sort(idx), np.flatnonzero(mask))
+    uv, _ = cam.project(pts[idx] @ T[:3, :3].T + T[:3, 3])
+    pixel = np.floor(uv[:, 1] + 0.5) * cam.width + np.floor(uv[:, 0] + 0.5)
+    assert np.all(np.diff(pixel) >= 0)
+    keep = np.flatnonzero(mask)
+    for form in ("hard", "smooth"):
+        a = NIDCost(cam, image, pts[keep], inten[keep], form=form)
+        b = NIDCost(cam, image, pts[idx], inten[idx], form=form)
+        assert_allclose(b.value(T), a.value(T), rtol=1e-12)

@@ -84,16 +84,19 @@ def joint_hist_hard(model_id, params, T, points, point_bins, image_bins, bins, *
     return _count_cells(cells, bins)
 
 
+_SIXTH = 1.0 / 6.0
+
+
 @jit
 def _bspline(s):
     """Uniform cubic B-spline weights of the 4 knots around ``s`` in [0, 1) and derivatives."""
     t = 1.0 - s
     s2 = s * s
     s3 = s2 * s
-    w0 = t * t * t / 6.0
-    w1 = (3.0 * s3 - 6.0 * s2 + 4.0) / 6.0
-    w2 = (-3.0 * s3 + 3.0 * s2 + 3.0 * s + 1.0) / 6.0
-    w3 = s3 / 6.0
+    w0 = t * t * t * _SIXTH
+    w1 = (3.0 * s3 - 6.0 * s2 + 4.0) * _SIXTH
+    w2 = (-3.0 * s3 + 3.0 * s2 + 3.0 * s + 1.0) * _SIXTH
+    w3 = s3 * _SIXTH
     d0 = -0.5 * t * t
     d1 = 1.5 * s2 - 2.0 * s
     d2 = -1.5 * s2 + s + 0.5
@@ -104,6 +107,20 @@ def _bspline(s):
 def _joint_hist_smooth_impl(
     model_id, params, T, points, point_bins, image_bins, bins, n_chunks, want_grad
 ):
+    """B-spline joint histogram (bins x bins), its derivative (bins x bins x 6) and the count.
+
+    Per point, the image bins of the 4 x 4 patch are gathered first. When they are all equal
+    (30-55 % of the points on equalised real images, 1-4 % on noisy synthetic ones), the point
+    adds exactly its total weight, 1, to one cell and nothing to the derivative: the weights sum
+    to 1 at every position, so their derivatives sum to 0, and the B-spline weights, the
+    derivative terms and the 16 x 7 histogram updates are skipped (1.15-1.25 x faster on a real
+    image, the same speed on noisy ones). Otherwise each pixel adds its weight and derivative
+    terms to its cell. Tried and dropped: summing the terms over runs of equal bins, or over the
+    patch's bin range, before updating the cells; 10-25 % slower on the noisy benchmark image
+    and on synthetic renders, where branch mispredictions cost more than the saved updates.
+    The count of points in the image is kept per chunk in a local variable (one write per
+    chunk, no false sharing between threads).
+    """
     n = points.shape[0]
     height, width = image_bins.shape
     hist = np.zeros((n_chunks, bins, bins))
@@ -116,7 +133,10 @@ def _joint_hist_smooth_impl(
         wv = np.empty(4)
         du = np.empty(4)
         dv = np.empty(4)
+        cols = np.empty(4, dtype=np.int64)
+        patch = np.empty(16, dtype=np.int64)
         m = np.empty((2, 6))
+        count = 0
         for i in range(c * step, min(n, (c + 1) * step)):
             x = points[i, 0]
             y = points[i, 1]
@@ -135,9 +155,22 @@ def _joint_hist_smooth_impl(
                 continue
             if not (u >= -0.5 and u < width - 0.5 and v >= -0.5 and v < height - 0.5):
                 continue
-            counts[c] += 1
+            count += 1
             ku = math.floor(u)
             kv = math.floor(v)
+            for ju in range(4):
+                cols[ju] = min(max(ku - 1 + ju, 0), width - 1)
+            for jv in range(4):
+                py = min(max(kv - 1 + jv, 0), height - 1)
+                for ju in range(4):
+                    patch[4 * jv + ju] = image_bins[py, cols[ju]]
+            differ = 0
+            for j in range(1, 16):
+                differ |= patch[j] ^ patch[0]
+            a = point_bins[i]
+            if differ == 0:  # one bin under the whole patch: weight 1, derivative 0
+                hist[c, a, patch[0]] += 1.0
+                continue
             wu[0], wu[1], wu[2], wu[3], du[0], du[1], du[2], du[3] = _bspline(u - ku)
             wv[0], wv[1], wv[2], wv[3], dv[0], dv[1], dv[2], dv[3] = _bspline(v - kv)
             if want_grad:
@@ -154,18 +187,16 @@ def _joint_hist_smooth_impl(
                 m[1, 3] = -j11 * zc + j12 * yc
                 m[1, 4] = j10 * zc - j12 * xc
                 m[1, 5] = -j10 * yc + j11 * xc
-            a = point_bins[i]
             for jv in range(4):
-                py = min(max(kv - 1 + jv, 0), height - 1)
                 for ju in range(4):
-                    px = min(max(ku - 1 + ju, 0), width - 1)
-                    b = image_bins[py, px]
+                    b = patch[4 * jv + ju]
                     hist[c, a, b] += wu[ju] * wv[jv]
                     if want_grad:
                         gu = du[ju] * wv[jv]
                         gv = wu[ju] * dv[jv]
                         for k in range(6):
                             dhist[c, a, b, k] += gu * m[0, k] + gv * m[1, k]
+        counts[c] = count  # one write per chunk: no false sharing between threads
     out = np.zeros((bins, bins))
     dout = np.zeros((bins, bins, 6))
     count = 0

@@ -42,6 +42,7 @@ __all__ = [
     "intensity_to_uint8",
     "make_virtual_camera",
     "render_lidar_image",
+    "visible_indices",
     "visible_mask",
 ]
 
@@ -402,6 +403,46 @@ def visible_mask(
     ndarray of shape (N,), bool
     """
     T, points = _check_inputs(camera, T_camera_lidar, points_lidar, "T_camera_lidar")
+    mask, _ = _visibility(camera, T, points, margin, window)
+    return mask
+
+
+def visible_indices(
+    camera: CameraModel,
+    T_camera_lidar,
+    points_lidar,
+    *,
+    margin: float = 0.1,
+    window: int = 0,
+) -> np.ndarray:
+    """Indices of the points :func:`visible_mask` keeps, ordered by their pixel (row-major).
+
+    Kernels that read the image around each point (the NID cost) then walk the image in memory
+    order instead of the cloud's order, which on a 2 MP image misses the caches at almost every
+    point. Measured on a synthetic 64-beam pair (190 k visible points, 1920 x 1080, serial CPU
+    time, load ~13): the smooth NID value + gradient 1.34 x, the value 1.8 x and the
+    hard-binned value 2.6 x faster than in cloud order. The pose changes little within an outer
+    iteration of fine registration, so sorting once per cost keeps most of the gain. Ties keep
+    the cloud's order (stable sort).
+
+    Parameters
+    ----------
+    camera, T_camera_lidar, points_lidar, margin, window
+        As :func:`visible_mask`.
+
+    Returns
+    -------
+    ndarray of shape (M,), int64
+        Indices into ``points_lidar``.
+    """
+    T, points = _check_inputs(camera, T_camera_lidar, points_lidar, "T_camera_lidar")
+    mask, pixel = _visibility(camera, T, points, margin, window)
+    keep = np.flatnonzero(mask)
+    return keep[np.argsort(pixel[keep], kind="stable")]
+
+
+def _visibility(camera, T, points, margin, window):
+    """Visible mask (N,) and the flat pixel (N,) of every point (-1: off the image)."""
     if not margin >= 0.0:
         raise ValueError(f"margin must be >= 0, got {margin}")
     if int(window) != window or window < 0:
@@ -412,4 +453,4 @@ def visible_mask(
         min_range = _k._min_filter(min_range, int(window))
     out = np.empty(points.shape[0], dtype=np.bool_)
     _k._visible(pixel, range2, np.ascontiguousarray(min_range).ravel(), float(margin), out)
-    return out
+    return out, pixel

@@ -78,6 +78,40 @@ def joint_histogram_smooth(camera, T, points, point_bins, image_bins, bins):
     return hist
 
 
+def bspline_derivatives(s: float) -> np.ndarray:
+    """Derivatives with respect to ``s`` of :func:`bspline_weights` (they sum to 0)."""
+    return np.array([-3 * (1 - s) ** 2, 9 * s**2 - 12 * s, -9 * s**2 + 6 * s + 3, 3 * s**2]) / 6
+
+
+def joint_histogram_smooth_derivative(camera, T, points, point_bins, image_bins, bins):
+    """Derivative (bins, bins, 6) of :func:`joint_histogram_smooth` w.r.t. ``T <- exp(d) T``.
+
+    Each in-image point moves its pixel by ``d(u, v)/d delta = J_proj [I, -[p_c]x]`` (left
+    perturbation, ``delta = [v, omega]``), and each of its 16 weights ``wu[i] wv[j]`` changes by
+    ``du[i] wv[j] du/d delta + wu[i] dv[j] dv/d delta``.
+    """
+    dhist = np.zeros((bins, bins, 6))
+    height, width = image_bins.shape
+    p_camera = _camera_points(T, points)
+    uv, jac, valid = camera.project_jacobian(p_camera)
+    inside = camera.in_image(uv) & valid
+    for (u, v), J, p, ok, a in zip(uv, jac, p_camera, inside, point_bins):
+        if not ok:
+            continue
+        hat = np.array([[0, -p[2], p[1]], [p[2], 0, -p[0]], [-p[1], p[0], 0]])
+        duv = J @ np.hstack([np.eye(3), -hat])  # (2, 6)
+        ku, kv = math.floor(u), math.floor(v)
+        wu, wv = bspline_weights(u - ku), bspline_weights(v - kv)
+        du, dv = bspline_derivatives(u - ku), bspline_derivatives(v - kv)
+        for jv in range(4):
+            py = min(max(kv - 1 + jv, 0), height - 1)
+            for ju in range(4):
+                px = min(max(ku - 1 + ju, 0), width - 1)
+                dw = du[ju] * wv[jv] * duv[0] + wu[ju] * dv[jv] * duv[1]
+                dhist[a, image_bins[py, px]] += dw
+    return dhist
+
+
 def nid_hard_numpy(model, intrinsics, distortion, T, points, point_bins, image_bins, bins):
     """The hard-binned NID with NumPy only: transform, project, round, ``np.bincount``.
 
