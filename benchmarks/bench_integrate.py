@@ -21,7 +21,8 @@ Two parts:
 
 The last line printed is one JSON object with every figure.
 
-Run: ``python benchmarks/bench_integrate.py [--parts synthetic,kitti] [--repeat 3]``
+Run: ``python benchmarks/bench_integrate.py [--parts synthetic,kitti] [--repeat 3]
+[--lidars spinning16,spinning64,spinning128] [--seeds 0,1,2]``
 """
 
 from __future__ import annotations
@@ -86,10 +87,10 @@ def _model_floor(trajectory, t0, t1):
     return float(r.max()), float(t.max())
 
 
-def synthetic_case(name, scene, motion, duration, seed):
+def synthetic_case(name, scene, motion, duration, seed, lidar="spinning64"):
     from nbcalib.synthetic import RigConfig, generate_sequence
 
-    config = RigConfig(lidar="spinning64", scene=scene, motion=motion, duration=duration, seed=seed)
+    config = RigConfig(lidar=lidar, scene=scene, motion=motion, duration=duration, seed=seed)
     seq, gen_wall, _ = _timed(lambda: generate_sequence(config))
     scans = [np.column_stack([s.points, s.intensities]) for s in seq.scans]
     times = [s.times for s in seq.scans]
@@ -148,6 +149,8 @@ def synthetic_case(name, scene, motion, duration, seed):
 
     return {
         "name": name,
+        "lidar": lidar,
+        "seed": seed,
         "scans": len(scans),
         "points_per_scan": int(np.mean([len(s) for s in scans])),
         "generation_s": gen_wall,
@@ -249,30 +252,42 @@ def main():
     parser.add_argument("--parts", default="synthetic,kitti")
     parser.add_argument("--repeat", type=int, default=3)
     parser.add_argument("--duration", type=float, default=3.0)
-    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--seeds", default="0", help="comma-separated seeds of the sequences")
+    parser.add_argument(
+        "--lidars", default="spinning64", help="comma-separated LiDAR presets (nbcalib.synthetic)"
+    )
     args = parser.parse_args()
     parts = args.parts.split(",")
     result = {"load_average_1min": os.getloadavg()[0], "cpus": os.cpu_count()}
     if "synthetic" in parts:
-        for name, scene, motion in (
-            ("nod_room", "room", "nod"),
-            ("drive_street", "street", "drive"),
-        ):
-            r = synthetic_case(name, scene, motion, args.duration, args.seed)
-            result[name] = r
-            print(
-                f"{name}: {r['scans']} scans x {r['points_per_scan']} pts, "
-                f"{r['scans_per_s_wall']:.1f} scans/s (CPU {r['scans_per_s_cpu']:.1f}); rotation "
-                f"error median {r['rotation_error_deg']['median']:.3f} deg (max "
-                f"{r['rotation_error_deg']['max']:.3f}; model floor median "
-                f"{r['model_floor_rot_deg']['median']:.3f}), translation median "
-                f"{1e3 * r['translation_error_m']['median']:.1f} mm, drift "
-                f"{r['drift_percent']:.2f} % of {r['path_m']:.2f} m; plane RMS deskewed "
-                f"{1e3 * r['sharpness']['deskewed']['plane_rms_m']:.1f} mm / rigid "
-                f"{1e3 * r['sharpness']['rigid']['plane_rms_m']:.1f} mm / true "
-                f"{1e3 * r['sharpness']['true_deskew']['plane_rms_m']:.1f} mm",
-                flush=True,
-            )
+        for lidar in args.lidars.split(","):
+            for seed in (int(x) for x in args.seeds.split(",")):
+                for name, scene, motion in (
+                    ("nod_room", "room", "nod"),
+                    ("drive_street", "street", "drive"),
+                ):
+                    r = synthetic_case(name, scene, motion, args.duration, seed, lidar)
+                    key = name if (lidar, seed) == ("spinning64", 0) else f"{name}_{lidar}_{seed}"
+                    result[key] = r
+                    print(
+                        f"{name} {lidar} seed {seed}: {r['scans']} scans x "
+                        f"{r['points_per_scan']} pts, {r['scans_per_s_wall']:.1f} scans/s (CPU "
+                        f"{r['scans_per_s_cpu']:.1f}); rotation error median "
+                        f"{r['rotation_error_deg']['median']:.3f} deg (p90 "
+                        f"{r['rotation_error_deg']['p90']:.3f}, max "
+                        f"{r['rotation_error_deg']['max']:.3f}; model floor median "
+                        f"{r['model_floor_rot_deg']['median']:.3f}), translation median "
+                        f"{1e3 * r['translation_error_m']['median']:.1f} mm (max "
+                        f"{1e3 * r['translation_error_m']['max']:.1f}), end error "
+                        f"{1e3 * r['end_error_m']:.2f} mm, drift {r['drift_percent']:.2f} % of "
+                        f"{r['path_m']:.2f} m; plane RMS deskewed "
+                        f"{1e3 * r['sharpness']['deskewed']['plane_rms_m']:.1f} mm / rigid "
+                        f"{1e3 * r['sharpness']['rigid']['plane_rms_m']:.1f} mm / true "
+                        f"{1e3 * r['sharpness']['true_deskew']['plane_rms_m']:.1f} mm; thickness "
+                        f"{1e3 * r['sharpness']['deskewed']['local_thickness_m']:.1f} / "
+                        f"{1e3 * r['sharpness']['rigid']['local_thickness_m']:.1f} mm",
+                        flush=True,
+                    )
     if "kitti" in parts:
         if not KITTI.is_dir():
             print(f"KITTI frames not found at {KITTI}; skipped")

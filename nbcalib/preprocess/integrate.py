@@ -31,8 +31,16 @@ knobs):
 
 The first scan defines the output frame: its begin pose is the identity. Its end pose is taken as
 the begin pose of the second scan, bootstrapped by a rigid alignment of the two raw scans (equal
-to the motion over one scan at constant velocity); the map is then rebuilt from the first scan
-deskewed with it and the second scan is registered again (``refine_first_scan``).
+to the motion over one scan at constant velocity) when the second scan's own registration says
+the first one was moving, and the identity (at rest) otherwise; the map is then rebuilt from the
+first scan deskewed with it and the second scan is registered again (``refine_first_scan``).
+
+The robust kernel narrows to the noise: once a scan has converged with the kernel of scale
+``robust_scale`` (and moved as predicted), the planes are looked up again with a scale of
+``robust_sigmas`` times the noise of the point-to-plane distances of the previous scan. Points
+matched to the wrong surface (a few centimetres off at edges and small objects) do not vanish at
+the true pose; with a 10 cm kernel they biased every scan by millimetres, the same way at rest
+as in motion.
 
 Differences from the reference toolbox (``koide3/direct_visual_lidar_calibration``, which uses
 CT-GICP through GTSAM), each deliberate:
@@ -179,7 +187,14 @@ class DynamicIntegrationConfig:
         A map patch whose points spread more than this off their plane (standard deviation)
         gives no residual, metres: edges, corners and clutter are not planes.
     robust_scale : float
-        Scale ``c`` of the Geman-McClure kernel on point-to-plane distances, metres.
+        Largest scale ``c`` of the Geman-McClure kernel on point-to-plane distances, metres.
+    robust_sigmas : float
+        Once a scan has converged with ``robust_scale`` and moved as predicted (to within
+        ``robust_scale``), its planes are looked up again and the registration finished with a
+        kernel of this many robust standard deviations (1.4826 median absolute value) of the
+        point-to-plane distances of the previous registration, between 1 cm and
+        ``robust_scale``: the kernel follows the sensor's noise, and points matched to the
+        wrong surface, which bias a wide kernel, get little weight. 0 keeps ``robust_scale``.
     robust_anneal : float
         While the velocity is still unknown (the first scans), the first plane lookup of a scan
         uses a kernel ``robust_anneal`` times wider, halved at each new lookup down to
@@ -239,6 +254,7 @@ class DynamicIntegrationConfig:
     max_correspondence_distance: float = 1.0
     max_plane_thickness: float = 0.03
     robust_scale: float = 0.1
+    robust_sigmas: float = 3.0
     robust_anneal: float = 4.0
     max_iterations: int = 20
     convergence_tolerance: float = 1e-4
@@ -269,7 +285,7 @@ class DynamicIntegrationConfig:
             value = getattr(self, name)
             if not (np.isfinite(value) and value > 0):
                 raise ValueError(f"{name} must be a positive number, got {value!r}")
-        non_negative = ("min_distance", "map_min_spacing", "begin_prior_weight")
+        non_negative = ("min_distance", "map_min_spacing", "begin_prior_weight", "robust_sigmas")
         if not (np.isfinite(self.robust_anneal) and self.robust_anneal >= 1.0):
             raise ValueError(f"robust_anneal must be >= 1, got {self.robust_anneal!r}")
         for name in (*non_negative, "motion_prior_weight"):
@@ -1055,7 +1071,9 @@ class _ContinuousTimeICP:
             ct_icp._normal_equations_parallel if config.parallel else ct_icp._normal_equations
         )
         self._associate = ct_icp._associate_parallel if config.parallel else ct_icp._associate
+        self._deskew = ct_icp._deskew_parallel if config.parallel else ct_icp._deskew
         self.scans_inserted = 0
+        self.noise_sigma = math.nan  # of the point-to-plane distances (``_update_noise``)
 
     # -- step 1: prediction ------------------------------------------------------------------
     @staticmethod
@@ -1114,6 +1132,8 @@ class _ContinuousTimeICP:
         reach = float(np.sqrt(np.median(np.einsum("ij,ij->i", points, points))))
         moved = math.inf  # how far the points moved since the planes were looked up
         associations, scale = 0, config.robust_scale
+        target = self._target_scale()
+        narrow = False
         used, cost, iterations = 0, 0.0, 0
         for iterations in range(1, config.max_iterations + 1):
             R_b, t_b = np.ascontiguousarray(T_b[:3, :3]), np.ascontiguousarray(T_b[:3, 3])
@@ -1127,23 +1147,17 @@ class _ContinuousTimeICP:
                     t_b,
                     t_e,
                     phi,
-                    (
-                        self.map.table,
-                        self.map.counts,
-                        self.map.store,
-                        self.map.voxel_size,
-                        config.knn,
-                        config.max_correspondence_distance,
-                        config.min_neighbors,
-                        config.max_plane_thickness,
-                    ),
+                    self._map_args(),
                     planes,
                 )
                 moved = 0.0
                 # graduated robust kernel: wide at first (a poor prediction must not silence the
-                # few planes that see it), halved at each new association down to robust_scale
+                # few planes that see it), halved at each new association down to robust_scale;
+                # narrowed to the noise only once converged with robust_scale, since the
+                # prediction can be off along a direction that few planes observe (the street
+                # corridor), and a narrow kernel would silence them
                 widen = config.robust_anneal / 2.0**associations if anneal else 1.0
-                scale = config.robust_scale * max(1.0, widen)
+                scale = (target if narrow else config.robust_scale) * max(1.0, widen)
                 associations += 1
             H, g, cost, used = self._normal_equations(points, s, R_b, t_b, t_e, phi, planes, scale)
             if used < config.min_correspondences:
@@ -1161,11 +1175,63 @@ class _ContinuousTimeICP:
             )
             moved += step
             if step < config.convergence_tolerance:
-                if moved <= 0.2 * config.reassociation_distance and scale <= config.robust_scale:
+                if moved <= 0.2 * config.reassociation_distance and scale <= target:
                     break
+                # narrow only when the scan moved as predicted, to within robust_scale: after a
+                # poor prediction (hard acceleration) a weak direction may still be unresolved
+                narrow = narrow or (
+                    scale <= config.robust_scale
+                    and max(_pose_distance(T_b, T_begin, reach), _pose_distance(T_e, T_end, reach))
+                    < config.robust_scale
+                )
                 moved = math.inf  # stale planes or a wide kernel: look them up once more
         rms = math.sqrt(cost / used) if used else math.nan
+        self._update_noise(points, s, T_b, T_e, planes)
         return _Registration(T_b, T_e, iterations, int(used), rms, True)
+
+    def _map_args(self) -> tuple:
+        config = self.config
+        return (
+            self.map.table,
+            self.map.counts,
+            self.map.store,
+            self.map.voxel_size,
+            config.knn,
+            config.max_correspondence_distance,
+            config.min_neighbors,
+            config.max_plane_thickness,
+        )
+
+    def _target_scale(self) -> float:
+        """Scale of the Geman-McClure kernel after the first plane lookup of a scan.
+
+        ``robust_sigmas`` times the noise of the point-to-plane distances measured at the end
+        of the previous registration (:meth:`_update_noise`), between
+        :data:`_MIN_ROBUST_SCALE` and ``robust_scale``; ``robust_scale`` until one is known. A
+        fixed wide kernel gives nearly full weight to points matched to the wrong surface (a
+        few centimetres off, at edges and small objects), whose distances do not vanish at the
+        true pose and bias it by millimetres; a kernel set by the sensor's noise does not.
+        """
+        config = self.config
+        if config.robust_sigmas <= 0 or not math.isfinite(self.noise_sigma):
+            return config.robust_scale
+        scale = config.robust_sigmas * self.noise_sigma
+        return min(config.robust_scale, max(scale, _MIN_ROBUST_SCALE))
+
+    def _update_noise(self, points, s, T_b, T_e, planes) -> None:
+        """Robust standard deviation (1.4826 median absolute value) of the final distances."""
+        from nbcalib.kernels.ct_icp import PLANE_NX, PLANE_NZ, PLANE_OFFSET, PLANE_WEIGHT
+
+        rows = planes[:, PLANE_WEIGHT] > 0
+        if self.config.robust_sigmas <= 0 or rows.sum() < self.config.min_correspondences:
+            return
+        R_b, t_b = np.ascontiguousarray(T_b[:3, :3]), np.ascontiguousarray(T_b[:3, 3])
+        phi = _relative_rotation_vector(R_b, T_e[:3, :3])
+        world = np.empty_like(points)
+        self._deskew(points, s, R_b, t_b, np.ascontiguousarray(T_e[:3, 3]), phi, world)
+        normals = planes[rows, PLANE_NX : PLANE_NZ + 1]
+        distance = np.einsum("ij,ij->i", normals, world[rows]) - planes[rows, PLANE_OFFSET]
+        self.noise_sigma = 1.4826 * float(np.median(np.abs(distance)))
 
     def _associate_rows(self, points, s, R_b, t_b, t_e, phi, map_args, planes) -> None:
         """Planes of all source points (``ct_icp._associate``), on one or two threads.
@@ -1476,6 +1542,17 @@ def _refine_first(icp, pending_first, src, src_s, reg, ends) -> _Registration:
     ``_REFINE_FIRST_ROUNDS`` times: deskew the first scan, rebuild the map, register the second
     (continuity prior relaxed, since its centre is what is being estimated), until its begin pose
     moves by less than a millimetre.
+
+    Constant velocity is an assumption, and the collection procedure breaks it: the sensor
+    rests, then starts moving, so the first scan is still while the second accelerates, and the
+    rigid alignment then reports part of the second scan's motion as the first's; the first
+    scan, deskewed with it, went into the map distorted and every later scan inherited the
+    offset (the nodding benchmark's drift, ``docs/BENCHMARKS.md``). So the data decides: the
+    second scan is registered by continuous-time ICP against the raw first scan with no prior on
+    its begin pose. At constant velocity the two raw scans are distorted alike and it begins at
+    ``T_01``; after a first scan at rest it begins near the identity. The first scan counts as
+    moving only when that begin pose is at least ``1 / _MOVING_FIRST_RATIO`` times closer to
+    ``T_01`` than to the identity (translation plus rotation at the median range).
     """
     index, prepared = pending_first
     if not (reg.registered and icp.config.refine_first_scan):
@@ -1494,16 +1571,26 @@ def _refine_first(icp, pending_first, src, src_s, reg, ends) -> _Registration:
     )
     if not rigid.registered:
         return reg
-    T_01 = rigid.T_begin  # the motion over one scan
+    T_01 = rigid.T_begin  # the motion over one scan, if the velocity was constant
     moved_m, turned_deg = _motion_size(T_01)
     if moved_m < _REST_TRANSLATION and turned_deg < _REST_ROTATION_DEG:
         return reg  # the first scan was taken at rest (as the collection procedure asks)
-    phi = _relative_rotation_vector(np.eye(3), T_01[:3, :3])
+    # where does the second scan begin, by its own data alone (no begin prior), against the raw
+    # first scan? At constant velocity the raw scans are distorted alike and it begins at T_01;
+    # after a first scan at rest it begins at the identity (and accelerates within the scan)
+    free = icp.register(
+        src, src_s, reg.T_begin, reg.T_end, zero, zero, begin_prior_weight=0.0, anneal=True
+    )
+    reach = float(np.sqrt(np.median(np.einsum("ij,ij->i", src, src))))
+    if not free.registered:
+        return reg
+    to_rest = _pose_distance(free.T_begin, np.eye(4), reach)
+    to_moving = _pose_distance(free.T_begin, T_01, reach)
+    if to_moving > _MOVING_FIRST_RATIO * to_rest:
+        return reg  # not clearly moving: keep the first scan at rest
     guess = _Registration(T_01, T_01 @ T_01, 0, 0, math.nan, True)
     for _ in range(_REFINE_FIRST_ROUNDS):
-        ends[index] = guess.T_begin.copy()
-        icp.reset_map()
-        icp.insert(icp.deskewed(prepared, np.eye(4), ends[index]), np.zeros(3))
+        _rebuild_first(icp, prepared, ends, index, guess.T_begin)
         R_b = guess.T_begin[:3, :3]
         phi = _relative_rotation_vector(R_b, guess.T_end[:3, :3])
         d = R_b.T @ (guess.T_end[:3, 3] - guess.T_begin[:3, 3])
@@ -1516,9 +1603,29 @@ def _refine_first(icp, pending_first, src, src_s, reg, ends) -> _Registration:
         guess = again
         if change < 1e-3:
             break
-    return guess if guess.registered and guess.iterations > 0 else reg
+    if guess.registered and guess.iterations > 0:
+        return guess
+    _rebuild_first(icp, prepared, ends, index, np.eye(4))  # back to the raw first scan
+    return reg
 
 
+def _pose_distance(T_a: np.ndarray, T_b: np.ndarray, reach: float) -> float:
+    """Translation plus rotation angle times ``reach`` between two poses, metres."""
+    angle = np.linalg.norm(_relative_rotation_vector(T_a[:3, :3], T_b[:3, :3]))
+    return float(np.linalg.norm(T_a[:3, 3] - T_b[:3, 3]) + reach * angle)
+
+
+def _rebuild_first(icp, prepared, ends, index, T_end) -> None:
+    """Set the first scan's end pose and rebuild the map from it deskewed with that pose."""
+    ends[index] = T_end.copy()
+    icp.reset_map()
+    icp.insert(icp.deskewed(prepared, np.eye(4), ends[index]), np.zeros(3))
+
+
+#: the first scan counts as moving when the second begins this much closer to T_01 than to rest
+_MOVING_FIRST_RATIO = 0.5
+#: smallest Geman-McClure scale of the adaptive kernel, metres
+_MIN_ROBUST_SCALE = 0.01
 #: the first scans (and the bootstrap of the first) start with a wide robust kernel
 _ANNEALED_SCANS = 3
 #: below this many source points per thread, the plane lookup stays on one thread
