@@ -27,6 +27,7 @@ COMMAND_MODULES = (
     "find_matches",
     "initial_guess",
     "calibrate",
+    "report",
     "evaluate",
     "models",
 )

@@ -1,0 +1,71 @@
+"""``nbcalib report WORKDIR``: overlays, cost landscapes, uncertainty and a verdict."""
+
+from __future__ import annotations
+
+import argparse
+import sys
+
+DESCRIPTION = """\
+Judge the calibration of a work directory and write WORKDIR/report/index.html: LiDAR points on
+the image (by range and by intensity) before and after refinement, image edges against LiDAR
+edges, the NID along each of the six axes around the result, per-pair NID and their spread, an
+uncertainty in centimetres and degrees, and a verdict, ok or suspect, with its reasons. The
+figures need matplotlib (pip install "nbcalib[viz]"); without it the page has numbers only.
+The quality figures are also stored in calib.json under nbcalib.quality.
+Prints the verdict on stdout; exits 0 whatever the verdict (--strict: 3 when suspect).
+"""
+
+EPILOG = """\
+examples:
+  nbcalib report work/
+  nbcalib report work/ --confidence 0.99
+  nbcalib calibrate work/ && nbcalib report work/ --strict || echo "check the result"
+"""
+
+#: Exit status of ``--strict`` when the verdict is "suspect".
+SUSPECT_STATUS = 3
+
+
+def add_parser(subparsers, formatter_class=argparse.HelpFormatter) -> argparse.ArgumentParser:
+    """Register ``report``."""
+    p = subparsers.add_parser(
+        "report",
+        help="quality report: overlays, NID curves, uncertainty, verdict (HTML)",
+        description=DESCRIPTION,
+        epilog=EPILOG,
+        formatter_class=formatter_class,
+    )
+    p.add_argument("workdir", metavar="WORKDIR", help="work directory after nbcalib calibrate")
+    p.add_argument(
+        "--confidence", type=float, default=0.95, help="confidence of the stated intervals"
+    )
+    p.add_argument(
+        "--strict", action="store_true", help=f"exit {SUSPECT_STATUS} when the verdict is suspect"
+    )
+    return p
+
+
+def run(args) -> int:
+    """Write the report and print the verdict."""
+    from nbcalib.errors import InputError
+    from nbcalib.report.html import make_report
+    from nbcalib.report.quality import AssessConfig
+
+    if not 0.0 < args.confidence < 1.0:
+        raise InputError(f"--confidence must be in (0, 1), got {args.confidence}")
+
+    def progress(done, total, what):
+        print(f"  [{done}/{total}] {what}", file=sys.stderr)
+
+    report = make_report(
+        args.workdir, progress=progress, assess_config=AssessConfig(confidence=args.confidence)
+    )
+    u = report.uncertainty
+    print(
+        f"verdict: {report.verdict}"
+        + "".join(f"\n  - {reason}" for reason in report.reasons)
+        + f"\nuncertainty ({100 * u['confidence']:.0f} %): translation <= "
+        f"{u['translation_total_cm']:.2f} cm, rotation <= {u['rotation_total_deg']:.3f} deg"
+        f"\nreport: {report.html_path}"
+    )
+    return SUSPECT_STATUS if args.strict and report.verdict == "suspect" else 0

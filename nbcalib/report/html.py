@@ -1,0 +1,396 @@
+"""``WORKDIR/report/index.html``: the quality report of a calibrated work directory.
+
+:func:`make_report` loads the pairs and the result of a work directory, judges the result with
+:func:`nbcalib.report.quality.assess`, writes the HTML page with its PNG figures, and stores the
+quality figures in ``calib.json`` under ``nbcalib.quality`` (the reference's keys are not
+touched).
+
+**Crash safety.** The report is written into a hidden temporary folder next to ``report/``
+(figures first, ``index.html`` last) that replaces ``report/`` by renames only when it is
+complete, so a report folder with an ``index.html`` is always a whole one. ``calib.json`` is
+updated afterwards, atomically.
+
+Without matplotlib (optional ``viz`` extra) the page holds the numbers only and says so.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import math
+import os
+import shutil
+import time
+import uuid
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from nbcalib.errors import InputError, MissingExtraError, require
+from nbcalib.io._files import write_bytes_atomic, write_text_atomic
+from nbcalib.io.calib_json import FINAL_STAGE, INITIAL_STAGES, CalibFile
+from nbcalib.report.quality import AXIS_NAMES, AssessConfig, Quality, assess
+
+__all__ = ["REPORT_DIR", "Report", "make_report"]
+
+#: Folder of the report inside the work directory.
+REPORT_DIR = "report"
+#: Pairs that get overlay and edge figures (the first ones).
+MAX_PAIRS_DRAWN = 4
+
+
+@dataclass
+class Report:
+    """Where the report went and what it says.
+
+    Attributes
+    ----------
+    html_path : Path
+        ``WORKDIR/report/index.html``.
+    verdict : {"ok", "suspect"}
+    reasons : list of str
+    uncertainty : dict
+        As :attr:`nbcalib.report.quality.Quality.uncertainty` (cm and degrees).
+    quality : Quality
+    figures : list of Path
+        The PNG files written (empty without matplotlib).
+    """
+
+    html_path: Path
+    verdict: str
+    reasons: list[str]
+    uncertainty: dict
+    quality: Quality = field(repr=False)
+    figures: list[Path] = field(default_factory=list)
+
+    def _repr_html_(self) -> str:
+        """Summary and figures inline, for notebooks."""
+        images = "".join(
+            f'<img style="max-width:100%" src="data:image/png;base64,'
+            f'{base64.b64encode(p.read_bytes()).decode()}"/>'
+            for p in self.figures
+            if p.is_file()
+        )
+        return _summary_html(self.quality) + images
+
+
+def make_report(
+    workdir: str | os.PathLike,
+    *,
+    progress: Callable[[int, int, str], None] | None = None,
+    assess_config: AssessConfig | None = None,
+) -> Report:
+    """Judge the calibration of a work directory and write its HTML report.
+
+    Parameters
+    ----------
+    workdir : str or PathLike
+        A work directory with ``calib.json`` holding ``results.T_lidar_camera`` (written by
+        ``nbcalib calibrate``).
+    progress : callable, optional
+        Called as ``progress(done, total, what)`` after each step.
+    assess_config : AssessConfig, optional
+        Scale and verdict limits of :func:`~nbcalib.report.quality.assess`.
+
+    Returns
+    -------
+    Report
+
+    Raises
+    ------
+    InputError
+        No work directory, no ``calib.json``, no calibration result, or a missing or corrupt
+        pair file; the message names the file and the command to run first.
+    """
+    from nbcalib.preprocess.workdir import WorkDir
+    from nbcalib.registration.refine import RegistrationPair
+
+    work = WorkDir(workdir)
+    if not work.path.is_dir():
+        raise InputError("work directory not found", work.path)
+    if not work.calib_path.is_file():
+        raise InputError("no calib.json here: run nbcalib preprocess first", work.path)
+    calib = work.read_calib()
+    if not calib.has_result(FINAL_STAGE):
+        raise InputError(
+            "no calibration result (results.T_lidar_camera): run nbcalib calibrate first",
+            work.calib_path,
+        )
+    T = calib.get_T_camera_lidar(FINAL_STAGE)
+    info = calib.nbcalib.get("calibration")
+    info = info if isinstance(info, dict) else {}
+    T_init, init_stage = _initial_guess(calib, info)
+    refine_config = _refine_config(info)
+    names = info.get("pairs") if isinstance(info.get("pairs"), list) else None
+    names = [n for n in names if isinstance(n, str)] if names else work.names()
+    if not names:
+        raise InputError("no LiDAR-camera pair in the work directory", work.path)
+    converged = info.get("converged") if isinstance(info.get("converged"), bool) else None
+
+    total = len(names) + 3
+    step = _Progress(progress, total)
+    camera = calib.camera_model()
+    loaded, pairs = [], []
+    for name in names:
+        p = work.load_pair(name)
+        loaded.append(p)
+        pairs.append(RegistrationPair(camera, p.image, p.points_lidar, p.intensities, name))
+        step(f"loaded {name}")
+    quality = assess(
+        pairs,
+        T,
+        T_init=T_init,
+        config=refine_config,
+        converged=converged,
+        assess_config=assess_config,
+    )
+    step("assessed")
+
+    try:
+        require("matplotlib", "viz")
+        have_mpl = True
+    except MissingExtraError:
+        have_mpl = False
+    final = work.path / REPORT_DIR
+    tmp = work.path / f".{REPORT_DIR}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp"
+    tmp.mkdir()
+    try:
+        figures = []
+        if have_mpl:
+            figures = _write_figures(tmp, quality, loaded, pairs, refine_config, T, T_init)
+        step("figures")
+        page = _page(quality, work.path, figures, have_mpl, init_stage)
+        write_text_atomic(tmp / "index.html", page)  # last: marks the folder complete
+        _swap_in(tmp, final)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+
+    calib = work.read_calib()  # re-read: keep whatever changed meanwhile
+    entry = quality.to_dict()
+    entry["report"] = f"{REPORT_DIR}/index.html"
+    entry["written"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+    entry["assessed_T_lidar_camera"] = list(calib.results.get(FINAL_STAGE, []))
+    calib.nbcalib["quality"] = entry
+    from nbcalib.io.calib_json import write_calib_json
+
+    write_calib_json(work.calib_path, calib)
+    step("calib.json")
+    return Report(
+        html_path=final / "index.html",
+        verdict=quality.verdict,
+        reasons=list(quality.reasons),
+        uncertainty=dict(quality.uncertainty),
+        quality=quality,
+        figures=[final / f.name for f in figures],
+    )
+
+
+class _Progress:
+    def __init__(self, callback, total: int):
+        self.callback, self.total, self.done = callback, total, 0
+
+    def __call__(self, what: str) -> None:
+        self.done += 1
+        if self.callback is not None:
+            self.callback(self.done, self.total, what)
+
+
+def _initial_guess(calib: CalibFile, info: dict) -> tuple[np.ndarray | None, str | None]:
+    """The initial guess ``calibrate`` started from, if calib.json still knows it."""
+    start = info.get("start")
+    if start == "--init":
+        return None, None  # given on the command line, not stored
+    stage = start if start in INITIAL_STAGES else calib.latest_initial_stage()
+    if stage is None or not calib.has_result(stage):
+        return None, None
+    return calib.get_T_camera_lidar(stage), stage
+
+
+def _refine_config(info: dict):
+    from nbcalib.registration.refine import RefineConfig
+
+    kwargs = {}
+    if info.get("optimizer") in ("lbfgs", "nelder_mead"):
+        kwargs["optimizer"] = info["optimizer"]
+    bins = info.get("bins")
+    if isinstance(bins, int) and not isinstance(bins, bool) and 2 <= bins <= 256:
+        kwargs["bins"] = bins
+    return RefineConfig(**kwargs)
+
+
+def _swap_in(tmp: Path, final: Path) -> None:
+    """Replace ``final`` by the finished folder ``tmp`` with renames only."""
+    old = None
+    if final.exists():
+        old = final.with_name(f".{final.name}.old.{uuid.uuid4().hex[:8]}")
+        os.replace(final, old)
+    os.replace(tmp, final)
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
+
+
+def _write_figures(folder: Path, quality, loaded, pairs, config, T, T_init) -> list[Path]:
+    from nbcalib.registration.refine import visible_subset
+    from nbcalib.report import figures as fg
+
+    written = []
+
+    def save(name: str, data: bytes) -> None:
+        path = folder / name
+        write_bytes_atomic(path, [data])
+        written.append(path)
+
+    save("nid_curves.png", fg.nid_curves(quality))
+    save("pairs_uncertainty.png", fg.pairs_and_uncertainty(quality))
+    for k, (work_pair, pair) in enumerate(zip(loaded, pairs)):
+        if k >= MAX_PAIRS_DRAWN:
+            break
+        poses = []
+        if T_init is not None:
+            poses.append(("initial guess", T_init, visible_subset(pair, T_init, config)))
+        poses.append(("result", T, visible_subset(pair, T, config)))
+        stem = _safe(pair.name or str(k))
+        save(
+            f"overlay_{stem}.png",
+            fg.overlays(pair.camera, work_pair.image, pair.points_lidar, pair.intensities, poses),
+        )
+        edges = fg.lidar_edge_points(
+            work_pair.lidar_intensity, work_pair.lidar_index, pair.points_lidar
+        )
+        save(
+            f"edges_{stem}.png",
+            fg.edge_overlay(pair.camera, work_pair.image, pair.points_lidar, edges, poses),
+        )
+    return written
+
+
+def _safe(name: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_." else "_" for c in name)[:80]
+
+
+# ------------------------------------------------------------------------------ HTML
+
+_STYLE = """
+body { font-family: sans-serif; margin: 2em; max-width: 1200px; color: #222; }
+table { border-collapse: collapse; margin: 0.5em 0 1.5em; }
+td, th { border: 1px solid #ccc; padding: 0.25em 0.6em; text-align: right; }
+th { background: #f3f3f3; }
+.ok { color: #fff; background: #2a7d2a; padding: 0.2em 0.6em; border-radius: 4px; }
+.suspect { color: #fff; background: #b03a2e; padding: 0.2em 0.6em; border-radius: 4px; }
+img { max-width: 100%; border: 1px solid #ddd; margin: 0.3em 0 1em; }
+.note { color: #666; font-size: 0.9em; }
+"""
+
+
+def _summary_html(q: Quality) -> str:
+    u = q.uncertainty
+    conf = 100 * u.get("confidence", 0.95)
+    reasons = "".join(f"<li>{html.escape(r)}</li>" for r in q.reasons) or "<li>none</li>"
+    t = [f"{x:.2f}" for x in u["translation_cm"]]
+    r = [f"{x:.3f}" for x in u["rotation_deg"]]
+    return (
+        f'<h2>Verdict: <span class="{q.verdict}">{q.verdict}</span></h2>'
+        f"<p>Reasons to distrust the result:</p><ul>{reasons}</ul>"
+        f"<h2>Uncertainty ({conf:.0f} %)</h2>"
+        "<table><tr><th></th><th>x (right)</th><th>y (down)</th><th>z (forward)</th>"
+        "<th>total (norm)</th></tr>"
+        f"<tr><th>translation, cm</th><td>&plusmn;{t[0]}</td><td>&plusmn;{t[1]}</td>"
+        f"<td>&plusmn;{t[2]}</td><td>&le; {u['translation_total_cm']:.2f}</td></tr>"
+        f"<tr><th>rotation, deg</th><td>&plusmn;{r[0]}</td><td>&plusmn;{r[1]}</td>"
+        f"<td>&plusmn;{r[2]}</td><td>&le; {u['rotation_total_deg']:.3f}</td></tr></table>"
+        f'<p class="note">Camera axes; translation = displacement of the camera centre. '
+        f"Method: {html.escape(str(u.get('method', '')))}.</p>"
+    )
+
+
+def _page(q: Quality, workdir: Path, figures: list[Path], have_mpl: bool, init_stage) -> str:
+    from nbcalib.io.calib_json import values_from_T_camera_lidar
+
+    xyzq = values_from_T_camera_lidar(q.T_camera_lidar)
+    rows = "".join(
+        f"<tr><td style='text-align:left'>{html.escape(n)}</td><td>{nid:.4f}</td>"
+        f"<td>{v}</td><td>{p}</td>"
+        + (
+            "<td>"
+            + ", ".join(
+                f"{100 * x:+.2f}" if a < 3 else f"{math.degrees(x):+.3f}"
+                for a, x in enumerate(q.pair_offsets[i])
+            )
+            + "</td>"
+            if q.pair_offsets is not None
+            else ""
+        )
+        + "</tr>"
+        for i, (n, nid, v, p) in enumerate(
+            zip(q.names, q.nid_per_pair, q.visible_points, q.pixels_covered)
+        )
+    )
+    offsets_head = (
+        "<th>own optimum - result (tx, ty, tz cm; rx, ry, rz deg)</th>"
+        if q.pair_offsets is not None
+        else ""
+    )
+    spread = ""
+    if q.pair_offsets is not None:
+        sd = np.std(q.pair_offsets, axis=0, ddof=1)
+        spread = (
+            "<p>Spread between pairs (standard deviation of their own optima): "
+            + ", ".join(
+                f"{AXIS_NAMES[a]} {100 * sd[a]:.2f} cm"
+                if a < 3
+                else f"{AXIS_NAMES[a]} {math.degrees(sd[a]):.3f} deg"
+                for a in range(6)
+            )
+            + "</p>"
+        )
+    init = ""
+    if q.init_change is not None:
+        init = (
+            f"<p>Moved {100 * q.init_change[0]:.2f} cm and {q.init_change[1]:.3f} deg from the "
+            f"initial guess ({html.escape(str(init_stage))}).</p>"
+        )
+    conv = {True: "yes", False: "no", None: "unknown"}[q.converged]
+    stamp = time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime())
+    if have_mpl:
+        figs = "".join(
+            f'<h3>{html.escape(_caption(p.name))}</h3><img src="{html.escape(p.name)}" '
+            f'alt="{html.escape(p.name)}"/>'
+            for p in figures
+        )
+    else:
+        figs = (
+            '<p class="note">matplotlib is not installed, so this report has numbers only; '
+            'install the figures with <code>pip install "nbcalib[viz]"</code> and run '
+            "<code>nbcalib report</code> again.</p>"
+        )
+    return (
+        "<!DOCTYPE html>\n<html><head><meta charset='utf-8'>"
+        f"<title>nbcalib report: {html.escape(workdir.name)}</title>"
+        f"<style>{_STYLE}</style></head><body>"
+        f"<h1>Calibration report: {html.escape(str(workdir))}</h1>"
+        "<p>T_lidar_camera (x, y, z in m; qx, qy, qz, qw): "
+        f"<code>[{', '.join(f'{v:.6f}' for v in xyzq)}]</code></p>"
+        f"{_summary_html(q)}"
+        f"<h2>Pairs</h2><p>Summed NID {q.nid:.4f}; optimiser converged: {conv}.</p>{init}"
+        "<table><tr><th>pair</th><th>NID</th><th>visible points</th><th>pixels covered</th>"
+        f"{offsets_head}</tr>{rows}</table>{spread}"
+        f"<h2>Figures</h2>{figs}"
+        f'<p class="note">Written by nbcalib at {stamp}'
+        "; the numbers are also in calib.json under nbcalib.quality.</p>"
+        "</body></html>\n"
+    )
+
+
+def _caption(name: str) -> str:
+    if name == "nid_curves.png":
+        return "NID along each axis around the result"
+    if name == "pairs_uncertainty.png":
+        return "Per-pair NID and the uncertainty"
+    if name.startswith("overlay_"):
+        return f"LiDAR points on the image, by range and intensity: {name[8:-4]}"
+    if name.startswith("edges_"):
+        return f"Edges: image vs LiDAR (intensity and depth): {name[6:-4]}"
+    return name

@@ -1,0 +1,557 @@
+"""Quality of a calibration: cost landscapes, uncertainty and a verdict, numbers only.
+
+:func:`assess` looks at the summed NID cost (:func:`nbcalib.registration.refine.build_cost`, the
+smooth B-spline form whatever optimiser produced the result) around a result ``T_camera_lidar``:
+
+**Curves.** The NID along each of the six tangent axes ``delta = [v, omega]`` of the left
+perturbation ``exp(delta) @ T_camera_lidar`` (docs/conventions.md section 3), with the visible
+points fixed at the result. ``v`` is the displacement of the camera centre expressed in camera
+axes (x right, y down, z forward; its norm is the translation error of
+:func:`nbcalib.metrics.pose_errors`), ``omega`` a rotation about the camera axes.
+
+**Uncertainty: curvature of the cost, scaled.** NID is not a likelihood, but a histogram
+log-likelihood of the image given the LiDAR intensities changes like ``N x NID`` for ``N``
+independent samples (mutual information times ``N`` is a log-likelihood ratio). Points that fall
+into one pixel see one image value and are not independent, so each pair counts ``N_k`` =
+*distinct pixels hit by its visible points*. The Fisher information is then
+``sum_k N_k H_k / scale``, ``H_k`` the Hessian of pair ``k``'s NID (central differences of its
+exact gradient), and the covariance its inverse. ``scale`` (:attr:`AssessConfig.scale`) absorbs
+what the model leaves out: the joint entropy's units, image blur and spatial correlation, and the
+bias of the synthetic-to-real gap; it was tuned on synthetic pairs with known truth
+(benchmarks/bench_report_coverage.py, half the pairs to tune, half to check). With two or more
+pairs, the spread of each pair's own optimum (one Newton step ``-H_k^-1 g_k`` from the joint
+result, clipped to the curves' range) is added as the covariance of the mean, so disagreeing
+pairs widen the interval. The
+curvature is used rather than a bootstrap because it costs a dozen gradient evaluations per pair,
+where a bootstrap refits the pose tens of times.
+
+**Verdict.** ``"ok"`` unless one of these holds (each adds a one-line reason): too few points in
+view; a flat cost (an uncertainty above the limits, or a cost that hardly rises along an axis);
+a curve whose lowest sample lies clearly away from the result (not at a minimum); a result far
+from the initial guess; pairs that disagree; an optimiser that did not converge; an NID so high
+that image and LiDAR share almost no information.
+
+Example
+-------
+>>> quality = assess(pairs, result.T_camera_lidar, T_init=T_init)       # doctest: +SKIP
+>>> quality.verdict, quality.reasons, quality.uncertainty["translation_total_cm"]  # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+
+from nbcalib.registration.refine import RefineConfig, RegistrationPair, build_cost, visible_subset
+from nbcalib.transforms import invert_T, pose_error, se3_exp, validate_T
+
+__all__ = ["AXIS_NAMES", "AssessConfig", "Quality", "assess", "interval_quantiles", "rejudge"]
+
+#: Names of the six tangent axes, in the order of ``delta = [v, omega]`` (camera axes).
+AXIS_NAMES = ("tx", "ty", "tz", "rx", "ry", "rz")
+
+#: Seed of the Monte-Carlo quantiles of the total translation/rotation error (deterministic).
+_QUANTILE_SEED = 20261123
+_QUANTILE_SAMPLES = 20000
+
+
+@dataclass(frozen=True)
+class AssessConfig:
+    """Settings of :func:`assess`; lengths in metres, angles in degrees.
+
+    Attributes
+    ----------
+    confidence : float
+        Confidence of the stated intervals (0.95).
+    scale : float
+        Variance scale of the curvature model (module docstring); tuned on synthetic pairs by
+        benchmarks/bench_report_coverage.py.
+    curve_samples : int
+        Samples per NID curve (odd, so that the result itself is one).
+    curve_translation, curve_rotation_deg : float
+        Half-range of the translation and rotation curves.
+    hessian_translation, hessian_rotation_deg : float
+        Central-difference steps of the Hessian.
+    min_visible_points : int
+        Fewer visible points over all pairs is "too few points in view".
+    max_translation_uncertainty, max_rotation_uncertainty_deg : float
+        A stated total uncertainty (at ``confidence``) above these is "flat cost".
+    min_curve_rise : float
+        A curve whose ends rise less than this above the result (NID units, per pair) is flat.
+    max_minimum_offset_translation, max_minimum_offset_rotation_deg : float
+        A curve's lowest sample farther than this from the result, and lower than it by more
+        than ``min_curve_rise / 4``, means the result is not at a minimum.
+    max_init_translation, max_init_rotation_deg : float
+        Result and initial guess farther apart than this are "far apart".
+    max_nid : float
+        A mean per-pair NID above this means image and LiDAR share almost no information.
+    pair_disagreement_quantile : float
+        Pairs disagree when a pair's own optimum lies outside this quantile of its own
+        uncertainty (chi-square with 6 degrees of freedom).
+    """
+
+    confidence: float = 0.95
+    # tuned by benchmarks/bench_report_coverage.py on 2026-11-23 (tuning half: 2.06)
+    scale: float = 2.06
+    curve_samples: int = 21
+    curve_translation: float = 0.10
+    curve_rotation_deg: float = 2.0
+    hessian_translation: float = 0.005
+    hessian_rotation_deg: float = 0.1
+    min_visible_points: int = 2000
+    max_translation_uncertainty: float = 0.05
+    max_rotation_uncertainty_deg: float = 1.0
+    min_curve_rise: float = 0.002
+    max_minimum_offset_translation: float = 0.02
+    max_minimum_offset_rotation_deg: float = 0.4
+    max_init_translation: float = 0.20
+    max_init_rotation_deg: float = 4.0
+    max_nid: float = 0.97
+    pair_disagreement_quantile: float = 0.999
+
+    def __post_init__(self):
+        if not 0.0 < self.confidence < 1.0:
+            raise ValueError(f"confidence must be in (0, 1), got {self.confidence}")
+        if not 0.0 < self.pair_disagreement_quantile < 1.0:
+            raise ValueError("pair_disagreement_quantile must be in (0, 1)")
+        if not self.scale > 0.0:
+            raise ValueError(f"scale must be > 0, got {self.scale}")
+        if self.curve_samples < 3 or self.curve_samples % 2 == 0:
+            raise ValueError(f"curve_samples must be odd and >= 3, got {self.curve_samples}")
+        positive = (
+            "curve_translation",
+            "curve_rotation_deg",
+            "hessian_translation",
+            "hessian_rotation_deg",
+        )
+        for name in positive:
+            if not getattr(self, name) > 0.0:
+                raise ValueError(f"{name} must be > 0")
+
+
+@dataclass
+class Quality:
+    """What :func:`assess` found; every array is float64.
+
+    Attributes
+    ----------
+    T_camera_lidar : ndarray of shape (4, 4)
+        The assessed result, ``p_camera = T_camera_lidar @ p_lidar``.
+    names : list of str
+        Pair names.
+    nid : float
+        Summed NID over the pairs at the result (smooth form).
+    nid_per_pair : ndarray of shape (K,)
+        Each pair's NID at the result.
+    visible_points : ndarray of shape (K,), int64
+        Points of each pair visible from the result (after hidden-point removal).
+    pixels_covered : ndarray of shape (K,), int64
+        Distinct image pixels hit by those points (the independent samples of the model).
+    curve_offsets : ndarray of shape (6, S)
+        Offsets along each axis of :data:`AXIS_NAMES`: metres for ``tx, ty, tz``, radians for
+        ``rx, ry, rz``.
+    curve_values : ndarray of shape (6, S)
+        Summed NID at those offsets.
+    gradient : ndarray of shape (6,)
+        Gradient of the summed NID at the result w.r.t. ``delta = [v, omega]``.
+    hessian : ndarray of shape (6, 6)
+        Information-weighted Hessian ``sum_k N_k H_k`` (symmetric).
+    covariance : ndarray of shape (6, 6)
+        Stated covariance of ``delta`` (m and rad), scale and pair spread included.
+    pair_offsets : ndarray of shape (K, 6) or None
+        Each pair's own optimum relative to the result (one Newton step), when K >= 2.
+    init_change : tuple of 2 floats or None
+        Distance from the initial guess: metres (camera centre) and degrees.
+    converged : bool or None
+        Whether the optimiser converged, if known.
+    uncertainty : dict
+        Human units at :attr:`confidence`: ``translation_cm`` and ``rotation_deg`` (3 values
+        each, half-widths along the camera axes), ``translation_total_cm`` and
+        ``rotation_total_deg`` (bounds on the error norms), ``confidence``, ``method``.
+    verdict : {"ok", "suspect"}
+    reasons : list of str
+        Why the result is suspect (empty when ok).
+    pair_gradients : ndarray of shape (K, 6)
+        Each pair's NID gradient at the result.
+    pair_hessians : ndarray of shape (K, 6, 6)
+        Each pair's NID Hessian at the result (not weighted).
+    config : AssessConfig
+    """
+
+    T_camera_lidar: np.ndarray
+    names: list[str]
+    nid: float
+    nid_per_pair: np.ndarray
+    visible_points: np.ndarray
+    pixels_covered: np.ndarray
+    curve_offsets: np.ndarray
+    curve_values: np.ndarray
+    gradient: np.ndarray
+    hessian: np.ndarray
+    covariance: np.ndarray
+    pair_offsets: np.ndarray | None
+    init_change: tuple[float, float] | None
+    converged: bool | None
+    uncertainty: dict
+    pair_gradients: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)), repr=False)
+    pair_hessians: np.ndarray = field(default_factory=lambda: np.zeros((0, 6, 6)), repr=False)
+    verdict: str = "ok"
+    reasons: list[str] = field(default_factory=list)
+    config: AssessConfig = field(default_factory=AssessConfig, repr=False)
+
+    @property
+    def sigma(self) -> np.ndarray:
+        """Standard deviations of ``delta`` (6,): metres, then radians."""
+        return np.sqrt(np.clip(np.diag(self.covariance), 0.0, None))
+
+    def to_dict(self) -> dict:
+        """JSON-ready summary for ``calib.json`` (``nbcalib.quality``); finite numbers only."""
+        out = {
+            "verdict": self.verdict,
+            "reasons": list(self.reasons),
+            "uncertainty": _finite(self.uncertainty),
+            "nid": _finite(self.nid),
+            "pairs": [
+                {
+                    "name": name,
+                    "nid": _finite(float(nid)),
+                    "visible_points": int(n),
+                    "pixels_covered": int(p),
+                }
+                for name, nid, n, p in zip(
+                    self.names, self.nid_per_pair, self.visible_points, self.pixels_covered
+                )
+            ],
+            "curves": {
+                "axes": list(AXIS_NAMES),
+                "offsets": "metres for tx, ty, tz; radians for rx, ry, rz",
+                "offset": _finite(self.curve_offsets.tolist()),
+                "nid": _finite(self.curve_values.tolist()),
+            },
+            "covariance": _finite(self.covariance.tolist()),
+            "converged": self.converged,
+        }
+        if self.init_change is not None:
+            out["change_from_init"] = {
+                "translation_m": _finite(self.init_change[0]),
+                "rotation_deg": _finite(self.init_change[1]),
+            }
+        if self.pair_offsets is not None:
+            out["pair_offsets"] = _finite(self.pair_offsets.tolist())
+        return out
+
+
+def _finite(value, cap: float = 1e6):
+    """Replace non-finite numbers (JSON cannot hold them) by +-cap, recursively."""
+    if isinstance(value, dict):
+        return {k: _finite(v, cap) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_finite(v, cap) for v in value]
+    if isinstance(value, (float, np.floating)):
+        v = float(value)
+        return v if math.isfinite(v) else math.copysign(cap, v) if not math.isnan(v) else cap
+    return value
+
+
+def assess(
+    pairs: Sequence[RegistrationPair],
+    T_camera_lidar,
+    *,
+    T_init=None,
+    config: RefineConfig | None = None,
+    converged: bool | None = None,
+    assess_config: AssessConfig | None = None,
+) -> Quality:
+    """Judge a calibration result: NID curves, uncertainty, verdict (module docstring).
+
+    Parameters
+    ----------
+    pairs : sequence of RegistrationPair
+        The LiDAR-camera pairs the result was computed from.
+    T_camera_lidar : array_like of shape (4, 4)
+        The result, ``p_camera = T_camera_lidar @ p_lidar``.
+    T_init : array_like of shape (4, 4), optional
+        The initial guess the optimiser started from.
+    config : RefineConfig, optional
+        The refinement settings (bins, hidden-point removal); the smooth NID is used whatever
+        the optimiser.
+    converged : bool, optional
+        Whether the optimiser converged (``RefineResult.converged``); False adds a reason.
+    assess_config : AssessConfig, optional
+        Ranges, steps, scale and verdict limits.
+
+    Returns
+    -------
+    Quality
+    """
+    if not pairs:
+        raise ValueError("assess needs at least one LiDAR-camera pair")
+    acfg = assess_config or AssessConfig()
+    # the smooth form has a gradient; serial kernels because assess makes ~150 evaluations of a
+    # few thousand points each, where threads cost more CPU than they save (bench_report_coverage
+    # on a loaded 2-core machine: 0.4 s CPU per case serial, 0.8-6.3 s with the parallel kernels)
+    rcfg = replace(config or RefineConfig(), optimizer="lbfgs", parallel=False)
+    T = validate_T(np.asarray(T_camera_lidar, dtype=np.float64), "T_camera_lidar")
+    steps = np.array([acfg.hessian_translation] * 3 + [math.radians(acfg.hessian_rotation_deg)] * 3)
+
+    costs, nids, visible, pixels, grads, hessians = [], [], [], [], [], []
+    for pair in pairs:
+        cost, counts = build_cost([pair], T, rcfg)
+        value, grad = cost.value_and_grad(T)
+        visible.append(counts[0])
+        pixels.append(_pixels_covered(pair, T, rcfg))
+        nids.append(value)
+        grads.append(grad)
+        hessians.append(_hessian(cost, T, steps) if counts[0] > 0 else np.zeros((6, 6)))
+        costs.append(cost)
+
+    curve_offsets, curve_values = _curves(costs, T, acfg)
+    init_change = None
+    if T_init is not None:
+        T0 = validate_T(np.asarray(T_init, dtype=np.float64), "T_init")
+        dt, dr = pose_error(invert_T(T), invert_T(T0))
+        init_change = (float(dt), float(dr))
+    quality = Quality(
+        T_camera_lidar=T,
+        names=[p.name or f"pair {i}" for i, p in enumerate(pairs)],
+        nid=float(sum(nids)),
+        nid_per_pair=np.array(nids, dtype=np.float64),
+        visible_points=np.array(visible, dtype=np.int64),
+        pixels_covered=np.array(pixels, dtype=np.int64),
+        curve_offsets=curve_offsets,
+        curve_values=curve_values,
+        gradient=np.sum(grads, axis=0),
+        hessian=sum(n * h for n, h in zip(pixels, hessians)),
+        covariance=np.zeros((6, 6)),
+        pair_offsets=None,
+        init_change=init_change,
+        converged=converged,
+        uncertainty={},
+        pair_gradients=np.array(grads, dtype=np.float64),
+        pair_hessians=np.array(hessians, dtype=np.float64),
+    )
+    return rejudge(quality, acfg)
+
+
+def rejudge(quality: Quality, assess_config: AssessConfig) -> Quality:
+    """Redo the uncertainty and verdict of ``quality`` under other settings, without new costs.
+
+    Uses the stored gradients, Hessians and curves; the curve ranges and Hessian steps of
+    ``assess_config`` are not applied (they need new cost evaluations).
+
+    Parameters
+    ----------
+    quality : Quality
+        From :func:`assess`.
+    assess_config : AssessConfig
+        New scale, confidence and verdict limits.
+
+    Returns
+    -------
+    Quality
+        A copy with ``covariance``, ``pair_offsets``, ``uncertainty``, ``verdict``, ``reasons``
+        and ``config`` replaced.
+    """
+    acfg = assess_config
+    q = replace(quality, config=acfg, reasons=[])
+    cov_curvature, n_negative = _inverse_psd(q.hessian)
+    covariance = acfg.scale * cov_curvature
+    pair_mahalanobis = []
+    n_pairs = len(q.names)
+    if n_pairs >= 2:
+        spans = np.array([acfg.curve_translation] * 3 + [math.radians(acfg.curve_rotation_deg)] * 3)
+        offsets = np.empty((n_pairs, 6))
+        for k in range(n_pairs):
+            n = float(q.pixels_covered[k])
+            h_inv, _ = _inverse_psd(n * q.pair_hessians[k])
+            # a Newton step of a flat or non-convex pair can be huge: keep it within the range
+            # the curves examine, where the cost was actually looked at
+            offsets[k] = np.clip(-(h_inv @ (n * q.pair_gradients[k])), -spans, spans)
+            pair_mahalanobis.append(_mahalanobis2(offsets[k], acfg.scale * h_inv))
+        q.pair_offsets = offsets
+        covariance = covariance + np.cov(offsets.T, ddof=1) / n_pairs
+    q.covariance = covariance
+    q.uncertainty = _uncertainty(covariance, acfg.confidence)
+    q.uncertainty["method"] = (
+        f"curvature of the summed NID, weighted by pixels covered, scale {acfg.scale:.4g}"
+        + (" + spread of per-pair optima" if n_pairs >= 2 else "")
+    )
+    q.reasons = _reasons(q, n_negative, pair_mahalanobis)
+    q.verdict = "suspect" if q.reasons else "ok"
+    return q
+
+
+# ------------------------------------------------------------------------------ pieces
+
+
+def _pixels_covered(pair: RegistrationPair, T: np.ndarray, config: RefineConfig) -> int:
+    """Distinct pixels ``floor(uv + 0.5)`` hit by the pair's visible points."""
+    keep = visible_subset(pair, T, config)
+    if keep.size == 0:
+        return 0
+    points = np.asarray(pair.points_lidar, dtype=np.float64)[keep]
+    uv, valid = pair.camera.project(points @ T[:3, :3].T + T[:3, 3], in_image=True)
+    pix = np.floor(uv[valid] + 0.5).astype(np.int64)
+    return int(np.unique(pix[:, 1] * pair.camera.width + pix[:, 0]).size)
+
+
+def _hessian(cost, T: np.ndarray, steps: np.ndarray) -> np.ndarray:
+    """Symmetric Hessian (6, 6) of ``cost`` w.r.t. ``delta`` by central differences of grads."""
+    H = np.empty((6, 6))
+    for j in range(6):
+        d = np.zeros(6)
+        d[j] = steps[j]
+        _, g_plus = cost.value_and_grad(se3_exp(d) @ T)
+        _, g_minus = cost.value_and_grad(se3_exp(-d) @ T)
+        H[:, j] = (g_plus - g_minus) / (2.0 * steps[j])
+    return 0.5 * (H + H.T)
+
+
+def _curves(costs, T: np.ndarray, config: AssessConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Summed NID along each axis; offsets (6, S) in m / rad, values (6, S)."""
+    s = np.linspace(-1.0, 1.0, config.curve_samples)
+    spans = [config.curve_translation] * 3 + [math.radians(config.curve_rotation_deg)] * 3
+    offsets = np.array([span * s for span in spans])
+    values = np.empty_like(offsets)
+    for axis in range(6):
+        for i, offset in enumerate(offsets[axis]):
+            d = np.zeros(6)
+            d[axis] = offset
+            Td = se3_exp(d) @ T
+            values[axis, i] = sum(c.value(Td) for c in costs)
+    return offsets, values
+
+
+def _inverse_psd(H: np.ndarray) -> tuple[np.ndarray, int]:
+    """Inverse of a symmetric matrix with eigenvalues floored; also the count of non-positive.
+
+    A direction of zero or negative curvature gets the floor ``1e-9 * max(|eig|)`` (a huge but
+    finite variance), so that a flat cost shows up as a large uncertainty.
+    """
+    w, V = np.linalg.eigh(0.5 * (H + H.T))
+    top = float(np.max(np.abs(w))) if w.size else 0.0
+    floor = max(top * 1e-9, 1e-300)
+    n_negative = int(np.sum(w <= 0.0))
+    w = np.maximum(w, floor)
+    return (V / w) @ V.T, n_negative
+
+
+def _mahalanobis2(x: np.ndarray, cov: np.ndarray) -> float:
+    inv, _ = _inverse_psd(cov)
+    return float(x @ inv @ x)
+
+
+def interval_quantiles(
+    covariance: np.ndarray, confidence: float
+) -> tuple[np.ndarray, float, float]:
+    """Half-widths and norm bounds of a Gaussian ``delta`` at ``confidence``.
+
+    Parameters
+    ----------
+    covariance : ndarray of shape (6, 6), float64
+        Covariance of ``delta = [v, omega]`` (m, rad).
+    confidence : float
+        In (0, 1).
+
+    Returns
+    -------
+    half_widths : ndarray of shape (6,)
+        ``z * sigma`` per axis (two-sided), metres then radians.
+    translation_bound : float
+        Quantile of ``|v|`` (metres), by seeded Monte Carlo.
+    rotation_bound : float
+        Quantile of ``|omega|`` (radians).
+    """
+    from scipy.stats import norm
+
+    cov = 0.5 * (covariance + covariance.T)
+    sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    z = float(norm.ppf(0.5 + confidence / 2.0))
+    rng = np.random.default_rng(_QUANTILE_SEED)
+    w, V = np.linalg.eigh(cov)
+    samples = (rng.standard_normal((_QUANTILE_SAMPLES, 6)) * np.sqrt(np.clip(w, 0, None))) @ V.T
+    t_bound = float(np.quantile(np.linalg.norm(samples[:, :3], axis=1), confidence))
+    r_bound = float(np.quantile(np.linalg.norm(samples[:, 3:], axis=1), confidence))
+    return z * sigma, t_bound, r_bound
+
+
+def _uncertainty(covariance: np.ndarray, confidence: float) -> dict:
+    half, t_bound, r_bound = interval_quantiles(covariance, confidence)
+    return {
+        "confidence": confidence,
+        "translation_cm": [100.0 * float(x) for x in half[:3]],
+        "rotation_deg": [math.degrees(float(x)) for x in half[3:]],
+        "translation_total_cm": 100.0 * t_bound,
+        "rotation_total_deg": math.degrees(r_bound),
+        "axes": "camera axes: x right, y down, z forward",
+    }
+
+
+def _reasons(q: Quality, n_negative: int, pair_mahalanobis: list[float]) -> list[str]:
+    """One line per reason to distrust the result (empty: ok)."""
+    from scipy.stats import chi2
+
+    c = q.config
+    reasons = []
+    total_visible = int(q.visible_points.sum())
+    if total_visible < c.min_visible_points:
+        reasons.append(
+            f"too few points in view: {total_visible} visible (at least {c.min_visible_points})"
+        )
+    if q.nid_per_pair.size and float(np.mean(q.nid_per_pair)) > c.max_nid:
+        reasons.append(
+            f"image and LiDAR share almost no information: NID {np.mean(q.nid_per_pair):.3f} "
+            f"(limit {c.max_nid}); wrong image, wrong pose or no texture"
+        )
+    u = q.uncertainty
+    flat = []
+    if n_negative:
+        flat.append(f"{n_negative} direction(s) with no curvature")
+    if u["translation_total_cm"] > 100.0 * c.max_translation_uncertainty:
+        flat.append(
+            f"translation uncertainty {u['translation_total_cm']:.1f} cm "
+            f"(limit {100 * c.max_translation_uncertainty:.1f})"
+        )
+    if u["rotation_total_deg"] > c.max_rotation_uncertainty_deg:
+        flat.append(
+            f"rotation uncertainty {u['rotation_total_deg']:.2f} deg "
+            f"(limit {c.max_rotation_uncertainty_deg:.2f})"
+        )
+    n_pairs = max(len(q.names), 1)
+    centre = q.curve_values.shape[1] // 2
+    rise = 0.5 * (q.curve_values[:, 0] + q.curve_values[:, -1]) - q.curve_values[:, centre]
+    flat_axes = [AXIS_NAMES[a] for a in range(6) if rise[a] / n_pairs < c.min_curve_rise]
+    if flat_axes:
+        flat.append(f"NID hardly rises along {', '.join(flat_axes)}")
+    if flat:
+        reasons.append("flat cost: " + "; ".join(flat))
+    off_axes = []
+    limits = [c.max_minimum_offset_translation] * 3 + [
+        math.radians(c.max_minimum_offset_rotation_deg)
+    ] * 3
+    for a in range(6):
+        best = int(np.argmin(q.curve_values[a]))
+        drop = q.curve_values[a, centre] - q.curve_values[a, best]
+        if abs(q.curve_offsets[a, best]) > limits[a] and drop > 0.25 * c.min_curve_rise * n_pairs:
+            unit = (100.0, "cm") if a < 3 else (math.degrees(1.0), "deg")
+            off_axes.append(f"{AXIS_NAMES[a]} {unit[0] * q.curve_offsets[a, best]:+.2f} {unit[1]}")
+    if off_axes:
+        reasons.append("not at a minimum: the NID is lower at " + ", ".join(off_axes))
+    if q.init_change is not None:
+        dt, dr = q.init_change
+        if dt > c.max_init_translation or dr > c.max_init_rotation_deg:
+            reasons.append(
+                f"initial guess and result far apart: {100 * dt:.1f} cm, {dr:.2f} deg (limits "
+                f"{100 * c.max_init_translation:.0f} cm, {c.max_init_rotation_deg:.1f} deg)"
+            )
+    if pair_mahalanobis:
+        limit = float(chi2.ppf(c.pair_disagreement_quantile, 6))
+        bad = [name for name, d2 in zip(q.names, pair_mahalanobis) if d2 > limit]
+        if bad:
+            reasons.append(f"pairs disagree: the optimum of {', '.join(bad)} lies elsewhere")
+    if q.converged is False:
+        reasons.append("the optimiser did not converge (stopped at its iteration limit)")
+    return reasons

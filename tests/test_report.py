@@ -1,0 +1,272 @@
+"""The quality report: assess() on tiny synthetic pairs, make_report() and `nbcalib report`."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+
+import numpy as np
+import pytest
+from scipy.ndimage import gaussian_filter
+
+from nbcalib.camera import example_camera
+from nbcalib.cli import main
+from nbcalib.errors import MissingExtraError
+from nbcalib.io.calib_json import read_calib_json
+from nbcalib.preprocess.lidar_image import (
+    estimate_lidar_fov,
+    make_virtual_camera,
+    render_lidar_image,
+)
+from nbcalib.preprocess.workdir import WorkDir, make_calib
+from nbcalib.registration.refine import RegistrationPair
+from nbcalib.report import AssessConfig, assess, rejudge
+from nbcalib.transforms import se3_exp
+from tests.test_nid import textured_scene
+from tests.tolerances import TOL
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+
+
+def make_pair(seed: int, n: int = 6000, name: str = "") -> RegistrationPair:
+    """A 200 x 150 textured image and LiDAR points that see it; the truth is the identity."""
+    cam = example_camera("plumb_bob", 200, 150)
+    image, points, intensities = textured_scene(cam, np.random.default_rng(seed), n=n, blur=2.0)
+    return RegistrationPair(cam, np.round(image * 255).astype(np.uint8), points, intensities, name)
+
+
+@pytest.fixture(scope="module")
+def pair():
+    return make_pair(1, name="a")
+
+
+@pytest.fixture(scope="module")
+def quality_at_truth(pair):
+    return assess([pair], np.eye(4))
+
+
+# ------------------------------------------------------------------------------ assess
+
+
+def test_result_at_the_truth_is_ok_with_finite_uncertainty(quality_at_truth):
+    q = quality_at_truth
+    assert q.verdict == "ok", q.reasons
+    u = q.uncertainty
+    values = [*u["translation_cm"], *u["rotation_deg"], u["translation_total_cm"]]
+    values.append(u["rotation_total_deg"])
+    assert np.all(np.isfinite(values)) and min(values) > 0
+    # a textured scene pins the pose well: centimetres and tenths of a degree at most
+    assert u["translation_total_cm"] < 5.0 and u["rotation_total_deg"] < 1.0
+    # every curve is lowest at (or next to) the result
+    centre = q.curve_values.shape[1] // 2
+    assert np.all(np.abs(np.argmin(q.curve_values, axis=1) - centre) <= 1)
+    assert q.curve_offsets.shape == q.curve_values.shape == (6, 21)
+    json.dumps(q.to_dict(), allow_nan=False)
+
+
+def test_a_result_off_the_minimum_is_suspect(pair):
+    T_bad = se3_exp(np.array([0.06, -0.04, 0.0, 0.0, 0.02, -0.01]))  # 7 cm, 1.3 degrees
+    q = assess([pair], T_bad)
+    assert q.verdict == "suspect"
+    assert any(r.startswith("not at a minimum") for r in q.reasons), q.reasons
+
+
+def test_far_initial_guess_is_suspect(pair):
+    T_init = se3_exp(np.array([0.3, 0.0, 0.1, 0.0, 0.0, 0.05]))
+    q = assess([pair], np.eye(4), T_init=T_init)
+    assert q.verdict == "suspect"
+    assert any("far apart" in r for r in q.reasons), q.reasons
+    assert q.init_change[0] == pytest.approx(np.linalg.norm([0.3, 0.0, 0.1]), rel=0.1)
+
+
+def test_mismatched_image_is_suspect(pair, rng):
+    other = gaussian_filter(rng.random(pair.image.shape), 2.0)
+    other = np.round(255 * (other - other.min()) / np.ptp(other)).astype(np.uint8)
+    q = assess([replace(pair, image=other)], np.eye(4))
+    assert q.verdict == "suspect"
+    assert any(r.startswith(("flat cost", "image and LiDAR share")) for r in q.reasons), q.reasons
+
+
+def test_too_few_points_is_suspect(pair):
+    few = replace(pair, points_lidar=pair.points_lidar[:300], intensities=pair.intensities[:300])
+    q = assess([few], np.eye(4))
+    assert q.verdict == "suspect"
+    assert any(r.startswith("too few points") for r in q.reasons), q.reasons
+
+
+def test_not_converged_is_a_reason(pair):
+    q = assess([pair], np.eye(4), converged=False)
+    assert q.verdict == "suspect" and any("did not converge" in r for r in q.reasons)
+
+
+def test_uncertainty_shrinks_with_more_points(quality_at_truth):
+    many = assess([make_pair(1, n=24000)], np.eye(4))
+    few, lots = quality_at_truth.uncertainty, many.uncertainty
+    assert lots["translation_total_cm"] < few["translation_total_cm"]
+    assert lots["rotation_total_deg"] < few["rotation_total_deg"]
+
+
+def test_uncertainty_shrinks_with_more_pairs(pair, quality_at_truth):
+    two = assess([pair, make_pair(2, name="b")], np.eye(4))
+    assert two.pair_offsets.shape == (2, 6)
+    one, both = quality_at_truth.uncertainty, two.uncertainty
+    assert both["translation_total_cm"] < one["translation_total_cm"]
+    assert both["rotation_total_deg"] < one["rotation_total_deg"]
+
+
+def test_rejudge_scales_the_intervals(quality_at_truth):
+    q1 = rejudge(quality_at_truth, AssessConfig(scale=1.0))
+    q4 = rejudge(quality_at_truth, AssessConfig(scale=4.0))
+    u1, u4 = q1.uncertainty, q4.uncertainty
+    np.testing.assert_allclose(q4.sigma, 2.0 * q1.sigma, **TOL["report_rescaled_sigma"])
+    np.testing.assert_allclose(
+        [u4["translation_total_cm"], u4["rotation_total_deg"]],
+        [2.0 * u1["translation_total_cm"], 2.0 * u1["rotation_total_deg"]],
+        **TOL["report_rescaled_sigma"],
+    )
+
+
+def test_assess_rejects_programming_errors(pair):
+    with pytest.raises(ValueError, match="at least one"):
+        assess([], np.eye(4))
+    with pytest.raises(ValueError):
+        assess([pair], np.full((4, 4), np.nan))
+    with pytest.raises(ValueError, match="curve_samples"):
+        AssessConfig(curve_samples=10)
+
+
+def test_lidar_edge_points_mark_the_near_side_of_a_depth_step():
+    from nbcalib.report.figures import lidar_edge_points
+
+    index = np.arange(8 * 10, dtype=np.int32).reshape(8, 10)
+    index[:, 9] = -1  # an empty column: no edge against empty pixels
+    ranges = np.where(np.arange(10) < 5, 2.0, 5.0)[None, :].repeat(8, axis=0).ravel()
+    points = np.column_stack([ranges, np.zeros_like(ranges), np.zeros_like(ranges)])
+    flat = np.full((8, 10), 128, dtype=np.uint8)  # no intensity edges
+    edges = lidar_edge_points(flat, index, points)
+    np.testing.assert_array_equal(edges, index[:, 4])  # column 4: the near side of the step
+
+
+# ------------------------------------------------------------------------------ work directory
+
+
+@pytest.fixture
+def workdir(tmp_path, pair):
+    """A finished work directory: one pair, an initial guess and a (true) result."""
+    vcam, T_vcam_lidar = make_virtual_camera(estimate_lidar_fov(pair.points_lidar))
+    lidar_image = render_lidar_image(vcam, T_vcam_lidar, pair.points_lidar, pair.intensities)
+    work = WorkDir(tmp_path / "work")
+    work.prepare()
+    work.write_pair(
+        "000000",
+        image=pair.image,
+        points_lidar=pair.points_lidar,
+        intensities=pair.intensities,
+        lidar_image=lidar_image,
+    )
+    calib = make_calib(pair.camera, ["000000"])
+    calib.set_T_camera_lidar("init_T_lidar_camera", se3_exp(np.array([0.03, 0, 0, 0, 0.01, 0])))
+    calib.set_T_camera_lidar("T_lidar_camera", np.eye(4))
+    work.write_calib(calib)
+    return work
+
+
+def test_report_writes_html_figures_and_calib_json(workdir, capsys):
+    before = read_calib_json(workdir.calib_path)
+    assert main(["report", str(workdir.path)]) == 0
+    out = capsys.readouterr().out
+    assert "verdict: ok" in out and "index.html" in out
+    folder = workdir.path / "report"
+    page = (folder / "index.html").read_text()
+    pngs = sorted(p.name for p in folder.glob("*.png"))
+    assert pngs == [
+        "edges_000000.png",
+        "nid_curves.png",
+        "overlay_000000.png",
+        "pairs_uncertainty.png",
+    ]
+    for name in pngs:
+        assert (folder / name).read_bytes()[:8] == PNG_MAGIC
+        assert f'src="{name}"' in page
+    assert "Verdict" in page and "Uncertainty" in page
+    after = read_calib_json(workdir.calib_path)
+    assert (after.camera, after.meta, after.results) == (before.camera, before.meta, before.results)
+    quality = after.nbcalib["quality"]
+    assert quality["verdict"] == "ok" and quality["report"] == "report/index.html"
+    assert quality["uncertainty"]["translation_total_cm"] > 0
+    assert not list(workdir.path.glob(".report*"))  # no temporary folders left
+
+
+def test_report_without_matplotlib_has_numbers_only(workdir, monkeypatch):
+    import nbcalib.report.html as report_html
+
+    def missing(module, extra):
+        raise MissingExtraError(module, extra)
+
+    monkeypatch.setattr(report_html, "require", missing)
+    report = report_html.make_report(workdir.path)
+    page = report.html_path.read_text()
+    assert "numbers only" in page and "nbcalib[viz]" in page
+    assert report.figures == [] and not list(report.html_path.parent.glob("*.png"))
+
+
+def test_a_failed_report_leaves_the_previous_one_whole(workdir, monkeypatch):
+    import nbcalib.report.figures as figures
+    from nbcalib.report.html import make_report
+
+    first = make_report(workdir.path)
+    page = first.html_path.read_text()
+
+    def broken(quality):
+        raise RuntimeError("disk full")
+
+    monkeypatch.setattr(figures, "nid_curves", broken)
+    with pytest.raises(RuntimeError, match="disk full"):
+        make_report(workdir.path)
+    assert first.html_path.read_text() == page
+    assert not list(workdir.path.glob(".report*"))
+
+
+def test_report_flags_a_garbage_result(workdir):
+    from nbcalib.report.html import make_report
+
+    calib = read_calib_json(workdir.calib_path)
+    calib.set_T_camera_lidar("T_lidar_camera", se3_exp(np.array([0.07, 0, 0.03, 0, 0.02, 0])))
+    workdir.write_calib(calib)
+    report = make_report(workdir.path)
+    assert report.verdict == "suspect" and report.reasons
+    assert "suspect" in report._repr_html_()
+
+
+@pytest.mark.parametrize(
+    "setup, message",
+    [
+        ("no_result", "run nbcalib calibrate first"),
+        ("no_calib", "run nbcalib preprocess first"),
+        ("no_dir", "work directory not found"),
+        ("no_cloud", "000000.ply"),
+    ],
+)
+def test_report_user_errors_exit_2(workdir, capsys, setup, message):
+    path = workdir.path
+    if setup == "no_result":
+        calib = read_calib_json(workdir.calib_path)
+        del calib.results["T_lidar_camera"]
+        workdir.write_calib(calib)
+    elif setup == "no_calib":
+        workdir.calib_path.unlink()
+    elif setup == "no_dir":
+        path = path / "missing"
+    elif setup == "no_cloud":
+        workdir.cloud_path("000000").unlink()
+    assert main(["report", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1
+    assert not (workdir.path / "report").exists()
+
+
+def test_report_strict_exit_status(workdir):
+    calib = read_calib_json(workdir.calib_path)
+    calib.set_T_camera_lidar("T_lidar_camera", se3_exp(np.array([0.07, 0, 0.03, 0, 0.02, 0])))
+    workdir.write_calib(calib)
+    assert main(["report", str(workdir.path), "--strict"]) == 3  # without --strict: 0 (above)
