@@ -12,7 +12,16 @@ semantics for inf and NaN; a kernel opts into them explicitly where a benchmark 
 
 from __future__ import annotations
 
+import os
 import types
+
+# numba's default threading layer on Linux is OpenMP (libgomp), whose idle threads spin for a
+# while before sleeping. When the cores are busy with anything else that spinning starves the
+# threads doing work: a parallel NID evaluation of 120 k points took 670 ms of wall time next to
+# a running test suite on 2 cores, 71 ms with passive waiting and 100 ms serial (benchmarks/
+# bench_nid.py; docs/BENCHMARKS.md). libgomp reads the policy when numba first loads it, so it
+# is set here, before any parallel kernel runs; a value the user exported wins.
+os.environ.setdefault("OMP_WAIT_POLICY", "PASSIVE")
 
 import numba
 
