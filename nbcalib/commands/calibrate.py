@@ -22,6 +22,7 @@ examples:
   nbcalib calibrate work/ --init=-0.1,0.05,0.02,0.5,-0.5,0.5,0.5
   nbcalib calibrate work/ --optimizer nelder_mead          # the paper's optimiser
   nbcalib calibrate work/ --pairs 1 --window 1              # first pair only, 3x3 visibility test
+  nbcalib calibrate work/ --pyramid-levels 0                # full resolution only (reference)
 
 --init takes T_lidar_camera as x,y,z,qx,qy,qz,qw (metres, quaternion xyzw), the calib.json layout;
 write --init=-0.1,... when the first value is negative.
@@ -51,6 +52,12 @@ def add_parser(subparsers, formatter_class) -> argparse.ArgumentParser:
         "--no-hidden-point-removal", action="store_true", help="use every point in the image"
     )
     p.add_argument("--pairs", type=int, default=None, help="use only the first N pairs")
+    p.add_argument(
+        "--pyramid-levels",
+        type=int,
+        default=d.pyramid_levels,
+        help="coarse image levels before the full resolution (0: full resolution only)",
+    )
     return p
 
 
@@ -99,6 +106,7 @@ def run(args) -> int:
             depth_margin=args.depth_margin,
             window=args.window,
             max_outer=args.max_outer,
+            pyramid_levels=args.pyramid_levels,
         )
     except ValueError as exc:
         raise InputError(str(exc)) from None
@@ -123,7 +131,7 @@ def run(args) -> int:
 
     def progress(i, step):
         print(
-            f"  outer {i + 1}: NID {step.nid_start:.5f} -> {step.nid:.5f}  "
+            f"  outer {i + 1} (level {step.level}): NID {step.nid_start:.5f} -> {step.nid:.5f}  "
             f"{step.iterations} it, {step.evaluations} evals, "
             f"moved {100 * step.translation_change:.2f} cm {step.rotation_change_deg:.3f} deg, "
             f"{sum(step.visible_points)} visible points, {step.seconds:.1f} s",
@@ -136,8 +144,11 @@ def run(args) -> int:
     calib.set_T_camera_lidar(FINAL_STAGE, result.T_camera_lidar)
     calib.nbcalib["calibration"] = {
         "start": init_stage,
+        # the start pose itself, so a report can compare (also when it came from --init)
+        "start_T_lidar_camera": [float(v) for v in pose_to_xyz_quat(invert_T(T_init))],
         "optimizer": config.optimizer,
         "bins": config.bins,
+        "pyramid_levels": config.pyramid_levels,
         "pairs": names,
         "nid": result.nid,
         "nid_start": result.history[0].nid_start,
@@ -145,6 +156,7 @@ def run(args) -> int:
         "iterations": result.iterations,
         "evaluations": result.evaluations,
         "converged": result.converged,
+        "stopped": result.stopped,
         "seconds": round(seconds, 3),
         "change_from_start": {"translation_m": float(dt), "rotation_deg": float(dr)},
     }
@@ -154,7 +166,8 @@ def run(args) -> int:
         f"T_lidar_camera = [{', '.join(f'{v:.6f}' for v in xyzq)}]  (x y z qx qy qz qw)\n"
         f"NID {result.history[0].nid_start:.5f} -> {result.nid:.5f}, moved "
         f"{100 * dt:.2f} cm {dr:.3f} deg from the start, {len(result.history)} outer iterations "
-        f"({'converged' if result.converged else 'stopped at --max-outer'}), {seconds:.1f} s; "
+        f"({'converged' if result.converged else result.stopped or 'stopped at --max-outer'}), "
+        f"{seconds:.1f} s; "
         f"written to {work.calib_path}"
     )
     return 0 if np.all(np.isfinite(result.T_camera_lidar)) else 1

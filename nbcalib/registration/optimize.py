@@ -24,7 +24,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import minimize
 
-from nbcalib.transforms import se3_exp, se3_log
+from nbcalib.transforms import hat, se3_exp, so3_left_jacobian
 
 __all__ = ["InnerResult", "minimize_lbfgs", "minimize_nelder_mead", "se3_left_jacobian"]
 
@@ -42,19 +42,31 @@ class InnerResult:
     history: list[float] = field(default_factory=list)
 
 
-def se3_left_jacobian(xi: np.ndarray, h: float = 1e-7) -> np.ndarray:
-    """Left Jacobian ``J`` of SE(3) at ``xi``: ``exp(xi + d) = exp(J d + O(d^2)) exp(xi)``.
+def se3_left_jacobian(xi: np.ndarray) -> np.ndarray:
+    """Left Jacobian ``J`` of SE(3) at ``xi = [v, omega]``: ``exp(xi + d) = exp(J d) exp(xi)``.
 
-    Computed by central differences of ``log(exp(xi + h e_k) exp(xi)^-1)`` (error ~1e-10 for the
-    small charts used here; six exp/log pairs, negligible next to a cost evaluation).
+    Closed form (Barfoot, *State Estimation for Robotics*, eq. 7.86, whose tangent order
+    ``[rho, phi]`` is nbcalib's ``[v, omega]``): ``J = [[J_l, Q], [0, J_l]]`` with ``J_l`` the
+    SO(3) left Jacobian of ``omega`` and ``Q(v, omega)`` below; Taylor coefficients near 0.
     """
     xi = np.asarray(xi, dtype=np.float64)
-    T_inv = np.linalg.inv(se3_exp(xi))
-    J = np.empty((6, 6))
-    for k in range(6):
-        e = np.zeros(6)
-        e[k] = h
-        J[:, k] = (se3_log(se3_exp(xi + e) @ T_inv) - se3_log(se3_exp(xi - e) @ T_inv)) / (2 * h)
+    v, omega = xi[:3], xi[3:]
+    theta = float(np.linalg.norm(omega))
+    P, W = hat(v), hat(omega)
+    if theta < 1e-3:
+        t2 = theta * theta
+        a, b, c = 1 / 6 - t2 / 120, 1 / 24 - t2 / 720, 1 / 120 - t2 / 2520
+    else:
+        s, co = math.sin(theta), math.cos(theta)
+        a = (theta - s) / theta**3
+        b = (theta * theta + 2 * co - 2) / (2 * theta**4)
+        c = (2 * theta - 3 * s + theta * co) / (2 * theta**5)
+    WP, PW, WW = W @ P, P @ W, W @ W
+    WPW = WP @ W
+    Q = 0.5 * P + a * (WP + PW + WPW) + b * (WW @ P + PW @ W - 3 * WPW) + c * (WPW @ W + WW @ PW)
+    J = np.zeros((6, 6))
+    J[:3, :3] = J[3:, 3:] = so3_left_jacobian(omega)
+    J[:3, 3:] = Q
     return J
 
 

@@ -9,6 +9,13 @@ Each outer iteration
    B-spline NID with its exact gradient, or Nelder-Mead on the hard-binned NID as the paper);
 3. stops when the pose moved less than ``converge_translation`` and ``converge_rotation_deg``.
 
+The whole loop runs coarse to fine over an image pyramid (``pyramid_levels``): at level ``k`` the
+image is averaged over ``2^k x 2^k`` blocks, re-equalised, and the camera's focal lengths and
+principal point are scaled to match, so the B-spline NID spans ``4 * 2^k`` full-resolution pixels.
+The coarse levels widen the basin of convergence (a 1.5 degree error is ~30 pixels of a
+1280 x 960 image); the finest level sets the accuracy. Hidden-point removal always runs at the
+full resolution.
+
 The reference toolbox stops on 0.1 m / 0.5 degree changes; that lets a run stop 5 cm from where
 the next iteration would go, so nbcalib's defaults are 1 mm / 0.01 degree.
 
@@ -28,12 +35,21 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from nbcalib.camera import CameraModel
+from nbcalib.camera import CameraModel, create_camera
 from nbcalib.registration.nid import MultiNIDCost, NIDCost
 from nbcalib.registration.optimize import InnerResult, minimize_lbfgs, minimize_nelder_mead
 from nbcalib.transforms import invert_T, pose_error, validate_T
 
-__all__ = ["OuterIteration", "RefineConfig", "RefineResult", "RegistrationPair", "refine"]
+__all__ = [
+    "OuterIteration",
+    "RefineConfig",
+    "RefineResult",
+    "RegistrationPair",
+    "build_cost",
+    "downscale_camera",
+    "downscale_image",
+    "refine",
+]
 
 
 @dataclass(frozen=True)
@@ -53,7 +69,7 @@ class RefineConfig:
     window : int
         Half-size of the pixel neighbourhood of the visibility test (0 = own pixel).
     max_outer : int
-        Outer iterations at most (10).
+        Outer iterations at most per pyramid level (10).
     max_translation, max_rotation_deg : float
         Trust box of one outer iteration around its start pose (0.2 m, 2 degrees).
     converge_translation, converge_rotation_deg : float
@@ -62,6 +78,19 @@ class RefineConfig:
         Iterations (L-BFGS) or, times 40, evaluations (Nelder-Mead) per outer iteration.
     nelder_mead_init_step : float
         Initial simplex size in the tangent space (reference: 1e-3).
+    pyramid_levels : int
+        Coarse levels above the full-resolution image (0: full resolution only, as the
+        reference). Level ``k`` halves the image ``k`` times; see the module docstring. Levels
+        whose image would be smaller than ``min_pyramid_size`` pixels (its shorter side) are
+        skipped: on a 400 x 300 image a 100 x 75 level let runs wander metres away.
+    min_pyramid_size : int
+        Shorter side, pixels, of the coarsest level used (240).
+    max_total_translation, max_total_rotation_deg : float
+        Stop, unconverged, when the pose has moved farther than this from the initial guess
+        (0.5 m, 5 degrees): the trust box bounds one outer iteration, not their sum, and on a
+        flat cost (a single real frame) the sum drifted to 0.5-1.8 m.
+    parallel : bool
+        Multithreaded NID kernels (same values; slower in CPU time on a loaded machine).
     """
 
     optimizer: str = "lbfgs"
@@ -76,15 +105,30 @@ class RefineConfig:
     converge_rotation_deg: float = 0.01
     max_inner: int = 50
     nelder_mead_init_step: float = 1e-3
+    pyramid_levels: int = 2
+    min_pyramid_size: int = 240
+    max_total_translation: float = 0.5
+    max_total_rotation_deg: float = 5.0
+    parallel: bool = True
 
     def __post_init__(self):
         if self.optimizer not in ("lbfgs", "nelder_mead"):
             raise ValueError(f"optimizer must be 'lbfgs' or 'nelder_mead', got {self.optimizer!r}")
-        for name in ("max_translation", "max_rotation_deg", "depth_margin"):
+        for name in (
+            "max_translation",
+            "max_rotation_deg",
+            "depth_margin",
+            "max_total_translation",
+            "max_total_rotation_deg",
+        ):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} must be >= 0")
         if self.max_outer < 1 or self.max_inner < 1:
             raise ValueError("max_outer and max_inner must be >= 1")
+        if not 0 <= self.pyramid_levels <= 5:
+            raise ValueError(f"pyramid_levels must be in [0, 5], got {self.pyramid_levels}")
+        if self.min_pyramid_size < 16:
+            raise ValueError(f"min_pyramid_size must be >= 16, got {self.min_pyramid_size}")
 
 
 @dataclass
@@ -123,15 +167,20 @@ class OuterIteration:
     rotation_change_deg: float
     seconds: float
     message: str
+    level: int = 0
 
 
 @dataclass
 class RefineResult:
-    """Result of :func:`refine`: the pose, the per-iteration history and totals."""
+    """Result of :func:`refine`: the pose, the per-iteration history and totals.
+
+    ``stopped`` says why a run was cut short (empty when it converged or used its iterations).
+    """
 
     T_camera_lidar: np.ndarray
     history: list[OuterIteration] = field(default_factory=list)
     converged: bool = False
+    stopped: str = ""
 
     @property
     def nid(self) -> float:
@@ -151,25 +200,77 @@ class RefineResult:
 
 def visible_subset(pair: RegistrationPair, T_camera_lidar, config: RefineConfig) -> np.ndarray:
     """Indices of the pair's points that the camera sees from ``T_camera_lidar``."""
-    from nbcalib.preprocess.lidar_image import visible_mask
+    from nbcalib.preprocess.lidar_image import visible_indices
 
     if not config.hidden_point_removal:
         _, valid = pair.camera.project(
             pair.points_lidar @ T_camera_lidar[:3, :3].T + T_camera_lidar[:3, 3], in_image=True
         )
         return np.flatnonzero(valid)
-    mask = visible_mask(
+    # sorted by pixel: the cost then reads the image in order (1.3-2.6x cheaper evaluations)
+    return visible_indices(
         pair.camera,
         T_camera_lidar,
         pair.points_lidar,
         margin=config.depth_margin,
         window=config.window,
     )
-    return np.flatnonzero(mask)
 
 
-def build_cost(pairs: Sequence[RegistrationPair], T_camera_lidar, config: RefineConfig):
-    """The summed NID over the points of each pair visible from ``T_camera_lidar``."""
+def downscale_camera(camera: CameraModel, level: int) -> CameraModel:
+    """The camera of an image averaged over ``2^level x 2^level`` pixel blocks.
+
+    Coarse pixel ``i`` averages fine pixels ``2i`` and ``2i + 1``, so its centre is the fine
+    position ``2i + 0.5`` (pixel centres at integers, docs/conventions.md):
+    ``u_coarse = (u_fine + 0.5) / 2 - 0.5``, which every model meets by scaling ``fx, fy`` (or the
+    equirectangular ``W, H``) by 1/2 and mapping ``cx, cy`` like ``u``. The image size is rounded
+    down (the last odd row or column is dropped).
+    """
+    if level == 0:
+        return camera
+    f = 2**level
+    intr = np.array(camera.intrinsics, dtype=np.float64)
+    if camera.model == "equirectangular":
+        intr[:2] = camera.width // f, camera.height // f
+    else:
+        intr[:2] /= f
+        intr[2:4] = (intr[2:4] + 0.5) / f - 0.5
+    return create_camera(
+        camera.model, intr, camera.distortion_coeffs, camera.width // f, camera.height // f
+    )
+
+
+def downscale_image(image, level: int) -> np.ndarray:
+    """Grey image averaged over ``2^level`` blocks and histogram-equalised again (uint8).
+
+    Parameters
+    ----------
+    image : ndarray of shape (H, W), uint8, uint16 or float in [0, 1]
+
+    Returns
+    -------
+    ndarray of shape (H // 2^level, W // 2^level), uint8 (level 0: the image unchanged)
+    """
+    if level == 0:
+        return image
+    from nbcalib.preprocess.intensity import equalize_image
+
+    img = np.asarray(image)
+    scale = {np.dtype(np.uint8): 255.0, np.dtype(np.uint16): 65535.0}.get(img.dtype, 1.0)
+    img = img.astype(np.float64) / scale
+    f = 2**level
+    h, w = img.shape[0] // f, img.shape[1] // f
+    blocks = img[: h * f, : w * f].reshape(h, f, w, f).mean(axis=(1, 3))
+    return equalize_image(blocks)
+
+
+def build_cost(
+    pairs: Sequence[RegistrationPair], T_camera_lidar, config: RefineConfig, *, level: int = 0
+):
+    """The summed NID over the points of each pair visible from ``T_camera_lidar``.
+
+    Visibility is tested with the full-resolution camera; the cost uses pyramid ``level``.
+    """
     form = "smooth" if config.optimizer == "lbfgs" else "hard"
     costs, counts = [], []
     for pair in pairs:
@@ -177,12 +278,13 @@ def build_cost(pairs: Sequence[RegistrationPair], T_camera_lidar, config: Refine
         counts.append(int(keep.size))
         costs.append(
             NIDCost(
-                pair.camera,
-                pair.image,
+                downscale_camera(pair.camera, level),
+                downscale_image(pair.image, level),
                 pair.points_lidar[keep],
                 np.asarray(pair.intensities)[keep],
                 bins=config.bins,
                 form=form,
+                parallel=config.parallel,
             )
         )
     return MultiNIDCost(costs), counts
@@ -217,51 +319,86 @@ def refine(
     T = validate_T(np.asarray(T_camera_lidar_init, dtype=np.float64), "T_camera_lidar_init")
     result = RefineResult(T.copy())
     max_rot = math.radians(config.max_rotation_deg)
-    for outer in range(config.max_outer):
-        t0 = time.perf_counter()
-        cost, counts = build_cost(pairs, T, config)
-        if sum(counts) == 0:
-            raise ValueError("no LiDAR point projects into any image at the current pose")
-        start_value = cost.value(T)
-        inner: InnerResult
-        if config.optimizer == "lbfgs":
-            inner = minimize_lbfgs(
-                cost.value_and_grad,
-                T,
-                max_translation=config.max_translation,
-                max_rotation=max_rot,
-                max_iterations=config.max_inner,
-            )
-        else:
-            inner = minimize_nelder_mead(
-                cost.value,
-                T,
-                init_step=config.nelder_mead_init_step,
-                max_translation=config.max_translation,
-                max_rotation=max_rot,
-                max_evaluations=40 * config.max_inner,
-            )
-        T_new = inner.T_camera_lidar
-        if inner.value > start_value:  # never accept a worse pose
-            T_new, inner.value = T, start_value
-        dt, dr = pose_error(invert_T(T_new), invert_T(T))
-        step = OuterIteration(
-            nid=inner.value,
-            nid_start=start_value,
-            visible_points=counts,
-            iterations=inner.iterations,
-            evaluations=inner.evaluations,
-            translation_change=float(dt),
-            rotation_change_deg=float(dr),
-            seconds=time.perf_counter() - t0,
-            message=inner.message,
-        )
-        result.history.append(step)
-        T = T_new
-        result.T_camera_lidar = T.copy()
-        if progress is not None:
-            progress(outer, step)
-        if dt < config.converge_translation and dr < config.converge_rotation_deg:
-            result.converged = True
-            break
+    outer = 0
+    T_init = T.copy()
+    max_total_rot = config.max_total_rotation_deg
+    for level in range(_usable_levels(pairs, config), -1, -1):
+        # coarse levels only bring the pose into the finest level's basin: looser stop
+        scale = 2**level
+        for _ in range(config.max_outer):
+            step, T_new = _outer_iteration(pairs, T, config, level, max_rot)
+            dt, dr = step.translation_change, step.rotation_change_deg
+            result.history.append(step)
+            T = T_new
+            result.T_camera_lidar = T.copy()
+            if progress is not None:
+                progress(outer, step)
+            outer += 1
+            moved_t, moved_r = pose_error(invert_T(T), invert_T(T_init))
+            if moved_t > config.max_total_translation or moved_r > max_total_rot:
+                result.converged = False
+                result.stopped = (
+                    f"moved {moved_t:.2f} m / {moved_r:.1f} deg from the initial guess, beyond "
+                    f"{config.max_total_translation} m / {max_total_rot} deg: stopped"
+                )
+                return result
+            if (
+                dt < scale * config.converge_translation
+                and dr < scale * config.converge_rotation_deg
+            ):
+                result.converged = level == 0
+                break
     return result
+
+
+def _usable_levels(pairs: Sequence[RegistrationPair], config: RefineConfig) -> int:
+    """Pyramid levels whose images keep at least ``min_pyramid_size`` pixels on the short side."""
+    shortest = min(min(p.camera.width, p.camera.height) for p in pairs)
+    levels = 0
+    while levels < config.pyramid_levels and shortest >> (levels + 1) >= config.min_pyramid_size:
+        levels += 1
+    return levels
+
+
+def _outer_iteration(pairs, T, config: RefineConfig, level: int, max_rot: float):
+    """Hidden-point removal at ``T``, then one inner minimisation at pyramid ``level``."""
+    t0 = time.perf_counter()
+    cost, counts = build_cost(pairs, T, config, level=level)
+    if sum(counts) == 0:
+        raise ValueError("no LiDAR point projects into any image at the current pose")
+    start_value = cost.value(T)
+    inner: InnerResult
+    if config.optimizer == "lbfgs":
+        inner = minimize_lbfgs(
+            cost.value_and_grad,
+            T,
+            max_translation=config.max_translation,
+            max_rotation=max_rot,
+            max_iterations=config.max_inner,
+        )
+    else:
+        inner = minimize_nelder_mead(
+            cost.value,
+            T,
+            init_step=config.nelder_mead_init_step * 2**level,
+            max_translation=config.max_translation,
+            max_rotation=max_rot,
+            max_evaluations=40 * config.max_inner,
+        )
+    T_new = inner.T_camera_lidar
+    if inner.value > start_value:  # never accept a worse pose
+        T_new, inner.value = T, start_value
+    dt, dr = pose_error(invert_T(T_new), invert_T(T))
+    step = OuterIteration(
+        nid=inner.value,
+        nid_start=start_value,
+        visible_points=counts,
+        iterations=inner.iterations,
+        evaluations=inner.evaluations,
+        translation_change=float(dt),
+        rotation_change_deg=float(dr),
+        seconds=time.perf_counter() - t0,
+        message=inner.message,
+        level=level,
+    )
+    return step, T_new

@@ -201,8 +201,13 @@ class _Progress:
 def _initial_guess(calib: CalibFile, info: dict) -> tuple[np.ndarray | None, str | None]:
     """The initial guess ``calibrate`` started from, if calib.json still knows it."""
     start = info.get("start")
+    stored = info.get("start_T_lidar_camera")
+    if stored is not None and len(stored) == 7:  # what calibrate actually started from
+        from nbcalib.transforms import invert_T, pose_from_xyz_quat
+
+        return invert_T(pose_from_xyz_quat(stored)), str(start)
     if start == "--init":
-        return None, None  # given on the command line, not stored
+        return None, None  # given on the command line by an older nbcalib, not stored
     stage = start if start in INITIAL_STAGES else calib.latest_initial_stage()
     if stage is None or not calib.has_result(stage):
         return None, None
