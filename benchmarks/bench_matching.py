@@ -110,6 +110,7 @@ def _real_pair(name, points, intensities, image_path, calib_path):
     return {
         "vcam": vcam,
         "name": name,
+        "intensities": intensities,
         "camera_image": equalize_image(image),
         "lidar_image": lidar_image,
         "index": index,

@@ -6,6 +6,8 @@
   deterministic for a seed;
 - :mod:`~nbcalib.initial_guess.refine`: Levenberg-Marquardt with a Cauchy kernel on the
   reprojection error (Eq. 1), analytic Jacobians;
+- :mod:`~nbcalib.initial_guess.multiview`: matches against camera-shaped LiDAR views at several
+  headings (or around a prior), the view with the best RANSAC support kept;
 - :mod:`~nbcalib.initial_guess.estimate`: both together, with inliers, RMS and a success flag;
 - :mod:`~nbcalib.initial_guess.manual` and :mod:`~nbcalib.initial_guess.picker`: hand-picked
   correspondences (file format, interactive picker);
@@ -43,6 +45,7 @@ from nbcalib.initial_guess.manual import (
     resolve_manual_correspondences,
     write_manual_correspondences,
 )
+from nbcalib.initial_guess.multiview import MultiViewMatches, ViewMatches, match_views
 from nbcalib.initial_guess.ransac import (
     RotationRansacResult,
     estimate_rotation_ransac,
@@ -62,15 +65,18 @@ __all__ = [
     "Correspondences",
     "InitialGuess",
     "ManualCorrespondence",
+    "MultiViewMatches",
     "RefineResult",
     "RotationRansacResult",
     "SyntheticCorrespondences",
+    "ViewMatches",
     "cauchy_loss",
     "correspondences_from_matches",
     "estimate_initial_guess",
     "estimate_rotation_ransac",
     "lift_lidar_pixels",
     "lift_matches",
+    "match_views",
     "pool_correspondences",
     "read_manual_correspondences",
     "refine_pose_lm",

@@ -8,6 +8,9 @@
 - :func:`draw_matches`: the side-by-side picture (:mod:`~nbcalib.matching.draw`).
 - :mod:`~nbcalib.matching.export`: torch -> ONNX (``nbcalib models export``; needs torch).
 - :mod:`~nbcalib.matching.preprocess`: image normalisations across the modality gap.
+- :mod:`~nbcalib.matching.views`: camera-shaped LiDAR views (the real camera's model at the
+  LiDAR's resolution, at several headings), matched by
+  :func:`nbcalib.initial_guess.match_views`.
 
 Importing this package is cheap: OpenCV, onnxruntime and torch load on first use.
 
@@ -43,6 +46,12 @@ _EXPORTS = {
     "NORMALIZATIONS": "preprocess",
     "normalize_image": "preprocess",
     "fill_holes": "preprocess",
+    "LidarView": "views",
+    "heading_rotations": "views",
+    "prior_rotations": "views",
+    "render_view": "views",
+    "scaled_camera": "views",
+    "view_scale": "views",
 }
 
 __all__ = sorted(_EXPORTS)

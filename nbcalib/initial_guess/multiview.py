@@ -1,0 +1,481 @@
+"""Match the camera image against several camera-shaped LiDAR views and keep the one that fits.
+
+The matchers need the LiDAR image in the camera's geometry and scale (:mod:`nbcalib.matching.
+views`). Without a prior the camera may look anywhere around a spinning LiDAR, so the dense
+cloud is rendered through the (scaled) real camera at ``n_headings`` level headings, evenly
+spaced about LiDAR z (12 views 30 degrees apart overlap for any camera wider than 30 degrees);
+with a prior ``T_camera_lidar`` a few views around its orientation replace them. Views that
+show almost nothing (a Livox's back side) are skipped.
+
+Each view is matched with the camera image (:func:`nbcalib.matching.match_images`), its
+keypoints are lifted through the view's own index map (nearest filled pixel within
+``search_radius``), and rotation-only RANSAC (:func:`~nbcalib.initial_guess.ransac.
+estimate_rotation_ransac`) counts the view's support. The view with the most RANSAC inliers
+wins; the views whose own RANSAC rotation agrees with the winner's (within ``pool_angle_deg``)
+add their correspondences (``pool=True``): overlapping views see the same structures at other
+places of their images. With ``refine=True`` the pose those correspondences give is estimated,
+and one more view is rendered from it (its rotation *and* camera position, so the view has the
+camera image's geometry up to the guess's error, without parallax) and matched; its
+correspondences are added.
+
+:func:`match_views` returns the per-view record (for the benchmark and the pictures) and the
+selected correspondences, ready for :func:`~nbcalib.initial_guess.estimate.
+estimate_initial_guess`.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from nbcalib.camera import CameraModel
+from nbcalib.initial_guess.correspondences import (
+    Correspondences,
+    lift_matches,
+    pool_correspondences,
+)
+
+__all__ = ["MultiViewMatches", "ViewMatches", "match_views"]
+
+
+@dataclass(frozen=True)
+class ViewMatches:
+    """One view's matches, correspondences and RANSAC support.
+
+    Attributes
+    ----------
+    view : LidarView
+        The rendered view.
+    matches : Matches
+        Camera keypoints (original camera pixels) and view keypoints (view pixels).
+    correspondences : Correspondences
+        The matches lifted through the view's index map.
+    R_camera_lidar : ndarray of shape (3, 3), float64 or None
+        The view's RANSAC rotation (None with fewer than 3 correspondences).
+    ransac_inliers : int
+        Its RANSAC support (0 without).
+    """
+
+    view: object
+    matches: object
+    correspondences: Correspondences
+    R_camera_lidar: np.ndarray | None
+    ransac_inliers: int
+
+
+@dataclass(frozen=True)
+class MultiViewMatches:
+    """What :func:`match_views` found.
+
+    Attributes
+    ----------
+    views : list of ViewMatches
+        Every rendered (non-empty) view, in heading order.
+    best : int
+        Index of the winning view in ``views`` (-1 when no view had correspondences).
+    pooled : tuple of int
+        Views whose correspondences were kept (the best first).
+    correspondences : Correspondences
+        The kept correspondences (``names`` = the data name; ``pair`` all 0).
+    seconds : float
+        Wall time of rendering, matching and RANSAC.
+    """
+
+    views: list[ViewMatches]
+    best: int
+    pooled: tuple[int, ...]
+    correspondences: Correspondences
+    seconds: float
+
+    def to_matches(self, lidar_camera: CameraModel, T_vcam_lidar, *, matcher: str = "") -> object:
+        """The kept correspondences as matches against the stored LiDAR image.
+
+        The camera keypoints stay; each LiDAR keypoint is its 3-D point projected into the
+        LiDAR image of preprocessing (``lidar_camera``, ``T_vcam_lidar`` from ``calib.json``),
+        so that the reference toolbox can read the file and the picture shows where the points
+        are. The cloud row of every LiDAR keypoint goes to ``info["kpts1_point_index"]``
+        (:func:`~nbcalib.initial_guess.correspondences.correspondences_from_matches` uses it
+        instead of lifting). Points that the LiDAR image does not show are left out.
+
+        Returns
+        -------
+        Matches
+        """
+        from nbcalib.matching.matches import Matches
+        from nbcalib.transforms import transform_points
+
+        corr = self.correspondences
+        uv, ok = lidar_camera.project(transform_points(T_vcam_lidar, corr.points_lidar))
+        ok &= np.all(np.isfinite(uv), axis=1)
+        n = int(np.count_nonzero(ok))
+        info = {
+            "mode": "views",
+            "views": [
+                {
+                    "heading_deg": round(v.view.heading_deg, 2),
+                    "matches": v.matches.num_matches,
+                    "lifted": len(v.correspondences),
+                    "ransac_inliers": v.ransac_inliers,
+                }
+                for v in self.views
+            ],
+            "best_view": self.best,
+            "pooled_views": list(self.pooled),
+            "kpts1_point_index": [int(i) for i in corr.point_index[ok]],
+            "seconds": round(self.seconds, 3),
+        }
+        if self.views:
+            info.update(
+                {k: v for k, v in self.views[0].matches.info.items() if k not in ("seconds",)}
+            )
+        return Matches(
+            corr.uv_camera[ok],
+            uv[ok],
+            np.arange(n),
+            corr.weights[ok] if corr.confidence is not None else np.ones(n),
+            matcher=matcher or (self.views[0].matches.matcher if self.views else ""),
+            info=info,
+        )
+
+    def summary(self) -> str:
+        """One line per view: heading, fill, matches, lifted, RANSAC inliers; the winner marked."""
+        lines = []
+        for k, v in enumerate(self.views):
+            mark = " <- best" if k == self.best else (" (pooled)" if k in self.pooled else "")
+            lines.append(
+                f"view {k:2d} heading {v.view.heading_deg:7.1f} deg, fill "
+                f"{v.view.fill_fraction:4.2f}: {v.matches.num_matches:4d} matches, "
+                f"{len(v.correspondences):4d} lifted, RANSAC inliers {v.ransac_inliers:4d}{mark}"
+            )
+        return "\n".join(lines)
+
+
+def _view_matches(
+    camera,
+    image,
+    view,
+    points,
+    matcher,
+    model_dir,
+    search_radius,
+    name,
+    ransac_iterations,
+    ransac_threshold,
+    seed,
+    match_options,
+) -> ViewMatches:
+    """Match one view, lift its keypoints, count its rotation-only RANSAC support."""
+    from nbcalib.errors import InputError
+    from nbcalib.initial_guess.ransac import estimate_rotation_ransac
+    from nbcalib.matching.match import match_images
+
+    m = match_images(
+        image,
+        view.intensity,
+        matcher=matcher,
+        camera_scale=view.scale,
+        lidar_fill_radius=0,  # the view is filled already, with its index map
+        model_dir=model_dir,
+        **match_options,
+    )
+    uv_c, uv_v, conf = m.matched()
+    corr = lift_matches(
+        uv_c, uv_v, view.index, points, search_radius=search_radius, name=name, confidence=conf
+    )
+    R_best, support = None, 0
+    if len(corr) >= 3:
+        try:
+            ransac = estimate_rotation_ransac(
+                camera,
+                corr.uv_camera,
+                corr.points_lidar,
+                iterations=ransac_iterations,
+                threshold=ransac_threshold,
+                seed=seed,
+            )
+            R_best, support = ransac.R_camera_lidar, ransac.n_inliers
+        except InputError:  # too few usable correspondences
+            pass
+    return ViewMatches(view, m, corr, R_best, support)
+
+
+def _refined_view(
+    camera,
+    image,
+    points,
+    values,
+    corr,
+    scale,
+    matcher,
+    model_dir,
+    ransac_threshold,
+    seed,
+    name,
+    search_radius,
+    fill_radius,
+    splat_pixels_at_1m,
+    median,
+    ransac_iterations,
+    match_options,
+) -> ViewMatches | None:
+    """One more view rendered from the pose the kept correspondences give (None if none)."""
+    from nbcalib.errors import InputError
+    from nbcalib.initial_guess.estimate import estimate_initial_guess
+    from nbcalib.matching.views import render_view
+
+    try:
+        guess = estimate_initial_guess(
+            camera,
+            corr.uv_camera,
+            corr.points_lidar,
+            weights=corr.weights,
+            ransac_threshold=ransac_threshold,
+            seed=seed,
+        )
+    except InputError:
+        return None
+    if not guess.success:
+        return None
+    T = guess.T_camera_lidar
+    view = render_view(
+        camera,
+        T[:3, :3],
+        points,
+        values,
+        scale=scale,
+        t_vcam_lidar=T[:3, 3],
+        fill_radius=fill_radius,
+        splat_pixels_at_1m=splat_pixels_at_1m,
+        median=median,
+    )
+    return _view_matches(
+        camera,
+        image,
+        view,
+        points,
+        matcher,
+        model_dir,
+        search_radius,
+        name,
+        ransac_iterations,
+        ransac_threshold,
+        seed,
+        match_options,
+    )
+
+
+def _rotation_angle_deg(R_a: np.ndarray, R_b: np.ndarray) -> float:
+    c = (np.trace(R_a.T @ R_b) - 1.0) / 2.0
+    return math.degrees(math.acos(min(1.0, max(-1.0, c))))
+
+
+def match_views(
+    camera: CameraModel,
+    camera_image: np.ndarray,
+    points_lidar,
+    intensities,
+    *,
+    matcher: str = "auto",
+    n_headings: int = 12,
+    T_camera_lidar_prior=None,
+    prior_yaw_offsets_deg=(-20.0, 0.0, 20.0),
+    pixels_per_degree: float | None = None,
+    min_fill: float = 0.05,
+    fill_radius: int = 2,
+    splat_pixels_at_1m: float = 0.0,
+    median: int = 0,
+    search_radius: float = 2.0,
+    ransac_iterations: int = 2048,
+    ransac_threshold: float = 5.0,
+    pool: bool = True,
+    pool_angle_deg: float = 2.0,
+    min_pool_support: int = 6,
+    refine: bool = True,
+    seed: int = 0,
+    name: str = "",
+    model_dir: str | os.PathLike | None = None,
+    **match_options,
+) -> MultiViewMatches:
+    """Match the camera image with camera-shaped LiDAR views (module docstring).
+
+    Parameters
+    ----------
+    camera : CameraModel
+        The real camera.
+    camera_image : ndarray of shape (H, W), uint8
+        Its grey image (equalised, as stored by preprocessing).
+    points_lidar : array_like of shape (N, 3)
+        Dense cloud, LiDAR frame, metres.
+    intensities : array_like of shape (N,)
+        Equalised intensities in [0, 1].
+    matcher : str, optional
+        As :func:`nbcalib.matching.match_images` (``auto``: the best exported, else ``sift``).
+    n_headings : int, optional
+        Level views around LiDAR z without a prior.
+    T_camera_lidar_prior : array_like of shape (4, 4), optional
+        A rough extrinsic: views at its orientation turned by ``prior_yaw_offsets_deg`` instead
+        of the heading sweep.
+    prior_yaw_offsets_deg : sequence of float, optional
+        Yaw offsets of the views around the prior, degrees.
+    pixels_per_degree : float, optional
+        Angular resolution of the views (default
+        :data:`~nbcalib.matching.views.DEFAULT_PIXELS_PER_DEGREE`; never above the camera's).
+    min_fill : float, optional
+        Views with a smaller fraction of filled pixels are not matched.
+    fill_radius : int, optional
+        Hole filling of the views, pixels.
+    splat_pixels_at_1m : float, optional
+        Range-dependent splat of the views (0: off; see
+        :func:`~nbcalib.matching.views.render_view`).
+    median : int, optional
+        Median filter of the view intensities (:func:`~nbcalib.matching.views.render_view`).
+    search_radius : float, optional
+        Lifting radius, pixels (:func:`~nbcalib.initial_guess.correspondences.lift_lidar_pixels`).
+    ransac_iterations, ransac_threshold : optional
+        Rotation-only RANSAC per view (hypotheses; pixels).
+    pool : bool, optional
+        Add the correspondences of views whose RANSAC rotation agrees with the best view's.
+    pool_angle_deg : float, optional
+        Agreement of two views' RANSAC rotations, degrees.
+    min_pool_support : int, optional
+        RANSAC inliers a view needs to be pooled.
+    refine : bool, optional
+        Estimate the pose from the kept correspondences (:func:`~nbcalib.initial_guess.
+        estimate.estimate_initial_guess`, confidence-weighted) and, when it succeeds, render one
+        more view *from that pose* (rotation and camera position: no parallax left, the view's
+        geometry is the camera image's), match it and add its correspondences.
+    seed : int, optional
+        RANSAC seed.
+    name : str, optional
+        Data name recorded in the correspondences.
+    model_dir : str or os.PathLike, optional
+        Exported models.
+    **match_options
+        Further keyword options of :func:`~nbcalib.matching.match_images` (``match_threshold``,
+        normalisations, ``max_keypoints``, ``threads``...).
+
+    Returns
+    -------
+    MultiViewMatches
+    """
+    from nbcalib.matching.match import resolve_matcher
+    from nbcalib.matching.views import (
+        DEFAULT_PIXELS_PER_DEGREE,
+        heading_rotations,
+        prior_rotations,
+        render_view,
+        view_scale,
+    )
+
+    if not isinstance(camera, CameraModel):
+        raise ValueError(f"camera must be a CameraModel, got {type(camera).__name__}")
+    image = np.asarray(camera_image)
+    if image.shape != (camera.height, camera.width) or image.dtype != np.uint8:
+        raise ValueError(
+            f"camera_image must be ({camera.height}, {camera.width}) uint8, "
+            f"got {image.dtype} {image.shape}"
+        )
+    points = np.ascontiguousarray(points_lidar, dtype=np.float64)
+    values = np.ascontiguousarray(intensities, dtype=np.float64)
+    if points.ndim != 2 or points.shape[1] != 3 or values.shape != (len(points),):
+        raise ValueError(
+            f"points_lidar (N, 3) and intensities (N,) expected, got {points.shape}, {values.shape}"
+        )
+    t0 = time.perf_counter()
+    matcher = resolve_matcher(matcher, model_dir)
+    # the views' index maps are not hole-filled: reach the nearest point across a filled hole
+    search_radius = max(float(search_radius), float(fill_radius))
+    ppd = DEFAULT_PIXELS_PER_DEGREE if pixels_per_degree is None else float(pixels_per_degree)
+    scale = view_scale(camera, ppd)
+    translations = None
+    if T_camera_lidar_prior is not None:
+        T_prior = np.asarray(T_camera_lidar_prior, dtype=np.float64)
+        if T_prior.shape != (4, 4) or not np.all(np.isfinite(T_prior)):
+            raise ValueError("T_camera_lidar_prior must be a finite 4 x 4 matrix")
+        rotations = prior_rotations(T_prior[:3, :3], prior_yaw_offsets_deg)
+        # the prior's own view is rendered from the prior camera position
+        translations = [T_prior[:3, 3] if off == 0.0 else None for off in prior_yaw_offsets_deg]
+    else:
+        rotations = heading_rotations(n_headings)
+    results: list[ViewMatches] = []
+    for k, R in enumerate(rotations):
+        view = render_view(
+            camera,
+            R,
+            points,
+            values,
+            scale=scale,
+            t_vcam_lidar=None if translations is None else translations[k],
+            fill_radius=fill_radius,
+            splat_pixels_at_1m=splat_pixels_at_1m,
+            median=median,
+        )
+        if view.fill_fraction < min_fill:
+            continue
+        results.append(
+            _view_matches(
+                camera,
+                image,
+                view,
+                points,
+                matcher,
+                model_dir,
+                search_radius,
+                name,
+                ransac_iterations,
+                ransac_threshold,
+                seed,
+                match_options,
+            )
+        )
+    best = -1
+    if results:
+        best = int(np.argmax([v.ransac_inliers for v in results]))
+        if results[best].ransac_inliers == 0 and len(results[best].correspondences) == 0:
+            best = -1
+    pooled: tuple[int, ...] = ()
+    if best >= 0:
+        keep = [best]
+        R0 = results[best].R_camera_lidar
+        if pool and R0 is not None:
+            for k, v in enumerate(results):
+                if (
+                    k != best
+                    and v.R_camera_lidar is not None
+                    and v.ransac_inliers >= min_pool_support
+                ):
+                    if _rotation_angle_deg(R0, v.R_camera_lidar) < pool_angle_deg:
+                        keep.append(k)
+        pooled = tuple(keep)
+        corr = pool_correspondences([results[k].correspondences for k in keep])
+        if refine:
+            extra = _refined_view(
+                camera,
+                image,
+                points,
+                values,
+                corr,
+                scale,
+                matcher,
+                model_dir,
+                ransac_threshold,
+                seed,
+                name,
+                search_radius,
+                fill_radius,
+                splat_pixels_at_1m,
+                median,
+                ransac_iterations,
+                match_options,
+            )
+            if extra is not None:
+                results.append(extra)
+                pooled = (*pooled, len(results) - 1)
+                corr = pool_correspondences([corr, extra.correspondences])
+    else:
+        corr = Correspondences.empty([name])
+    return MultiViewMatches(results, best, pooled, corr, time.perf_counter() - t0)

@@ -1,0 +1,303 @@
+"""Camera-shaped LiDAR views (nbcalib.matching.views) and multi-view matching (multiview)."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+from tolerances import TOL
+
+from nbcalib.camera import create_camera, example_camera
+from nbcalib.initial_guess import (
+    Correspondences,
+    correspondences_from_matches,
+    estimate_initial_guess,
+    match_views,
+)
+from nbcalib.matching.matches import Matches
+from nbcalib.matching.views import (
+    _fill_index,
+    heading_rotations,
+    prior_rotations,
+    render_view,
+    scaled_camera,
+    view_scale,
+)
+from nbcalib.metrics import pose_errors
+from nbcalib.synthetic import default_T_camera_lidar
+from nbcalib.transforms import make_T, transform_points
+
+R_FORWARD = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])
+
+
+def test_headings_are_level_rotations_at_even_yaws():
+    rotations = heading_rotations(8, offset_deg=10.0)
+    assert len(rotations) == 8
+    for k, R in enumerate(rotations):
+        np.testing.assert_allclose(R @ R.T, np.eye(3), **TOL["transform"])
+        assert np.linalg.det(R) == pytest.approx(1.0)
+        axis = R[2]  # optical axis in LiDAR coordinates
+        assert axis[2] == pytest.approx(0.0, abs=1e-12)  # level
+        assert R[1] == pytest.approx([0.0, 0.0, -1.0])  # image down = LiDAR down
+        yaw = math.degrees(math.atan2(axis[1], axis[0]))
+        assert (yaw - (10.0 + 45.0 * k) + 180.0) % 360.0 - 180.0 == pytest.approx(0.0, abs=1e-9)
+    np.testing.assert_allclose(heading_rotations(1)[0], R_FORWARD, atol=1e-15)
+    with pytest.raises(ValueError, match="n_headings"):
+        heading_rotations(0)
+
+
+def test_prior_rotations_turn_about_lidar_z():
+    truth = default_T_camera_lidar("spinning", 3)[:3, :3]
+    R0, R1 = prior_rotations(truth, (0.0, 30.0))
+    np.testing.assert_allclose(R0, truth, atol=1e-15)
+    # a LiDAR direction at yaw +30 deg from d shows in view 1 where d shows in view 0
+    d = np.array([0.3, -0.8, 0.1])
+    turn = np.array(
+        [
+            [math.cos(0.5236), -math.sin(0.5236), 0],
+            [math.sin(0.5236), math.cos(0.5236), 0],
+            [0, 0, 1],
+        ]
+    )
+    np.testing.assert_allclose(R1 @ (turn @ d), R0 @ d, atol=1e-4)
+
+
+@pytest.mark.parametrize("model", ["pinhole", "plumb_bob", "fisheye", "omnidir", "equirectangular"])
+def test_scaled_camera_scales_pixels_about_the_image_corner(model, rng):
+    camera = example_camera(model)
+    small = scaled_camera(camera, 0.25)
+    assert (small.width, small.height) == (round(camera.width / 4), round(camera.height / 4))
+    p = rng.normal(size=(50, 3)) + np.array([0.0, 0.0, 4.0])
+    uv, ok = camera.project(p)
+    uv_s, ok_s = small.project(p)
+    assert np.array_equal(ok, ok_s) and ok.sum() > 10
+    # pixel centres at integers: u' = (u + 0.5) s - 0.5
+    np.testing.assert_allclose(uv_s[ok], (uv[ok] + 0.5) * 0.25 - 0.5, **TOL["transform"])
+    with pytest.raises(ValueError, match="scale"):
+        scaled_camera(camera, 0.0)
+
+
+def test_view_scale_gives_the_asked_resolution():
+    camera = example_camera("pinhole")  # about 0.06 degree per pixel at the centre
+    s = view_scale(camera, 5.0)
+    from nbcalib.matching.match import pixels_per_radian
+
+    assert pixels_per_radian(scaled_camera(camera, s)) * math.pi / 180 == pytest.approx(
+        5.0, rel=2e-2
+    )
+    assert view_scale(camera, 1e6) == 1.0  # never above the camera's own resolution
+
+
+def test_fill_index_takes_existing_rows_within_the_radius():
+    index = np.full((9, 9), -1, dtype=np.int32)
+    index[4, 4] = 7
+    filled = _fill_index(index, 2)
+    assert set(np.unique(filled)) == {-1, 7}
+    rows, cols = np.nonzero(filled == 7)
+    assert np.max(np.maximum(abs(rows - 4), abs(cols - 4))) == 2  # Chebyshev radius 2
+    assert np.count_nonzero(filled == 7) == 25
+    assert np.array_equal(_fill_index(index, 0), index)
+
+
+def _cylinder(rng, n=250_000, radius=8.0):
+    """A textured cylinder wall around the LiDAR: intensities from blurred noise on (phi, z)."""
+    import cv2
+
+    phi = rng.uniform(-np.pi, np.pi, n)
+    z = rng.uniform(-3.0, 3.0, n)
+    points = np.column_stack([radius * np.cos(phi), radius * np.sin(phi), z])
+    # texture cells of ~4 cm, blobs of ~0.3 m: corners for the keypoint detectors
+    texture = cv2.GaussianBlur(rng.uniform(0.0, 1.0, (150, 1256)).astype(np.float32), (0, 0), 4.0)
+    texture = (texture - texture.min()) / (texture.max() - texture.min())
+    rows = np.minimum(((z + 3.0) / 6.0 * 150).astype(np.int64), 149)
+    cols = np.minimum(((phi + np.pi) / (2 * np.pi) * 1256).astype(np.int64), 1255)
+    return points, texture[rows, cols].astype(np.float64)
+
+
+def test_render_view_index_lifts_to_the_points_shown(rng):
+    points, intensities = _cylinder(rng, n=60_000)
+    camera = example_camera("plumb_bob", 640, 480)
+    R = heading_rotations(4)[1]  # looking along LiDAR +y
+    view = render_view(camera, R, points, intensities, scale=0.5, fill_radius=1)
+    assert view.intensity.shape == (240, 320) and view.heading_deg == pytest.approx(90.0)
+    own = view.index >= 0
+    shown = view.intensity > 0
+    assert 0.3 < view.fill_fraction <= 1.0 and shown.sum() > own.sum()
+    assert np.all(shown[own])  # the fill only adds
+    # every z-buffer pixel holds a point that projects into it
+    v, u = np.nonzero(own)
+    uv, ok = view.camera.project(transform_points(view.T_vcam_lidar, points[view.index[v, u]]))
+    assert ok.all()
+    assert np.max(np.abs(uv - np.column_stack([u, v]))) <= 0.5 + 1e-9
+
+
+def test_render_view_splat_fills_holes_with_nearer_points_first(rng):
+    points, intensities = _cylinder(rng, n=20_000, radius=3.0)
+    camera = example_camera("pinhole", 640, 480)
+    R = heading_rotations(1)[0]
+    bare = render_view(camera, R, points, intensities, scale=0.5, fill_radius=0)
+    splat = render_view(
+        camera, R, points, intensities, scale=0.5, fill_radius=0, splat_pixels_at_1m=6.0
+    )
+    assert np.count_nonzero(splat.index >= 0) > np.count_nonzero(bare.index >= 0)
+    # the splat only adds: the z-buffer's own pixels keep their points
+    own = bare.index >= 0
+    assert np.array_equal(splat.index[own], bare.index[own])
+
+
+def _self_consistent_pair(rng, yaw_deg):
+    """A cloud and a camera image rendered from the same cloud (no modality gap)."""
+    points, intensities = _cylinder(rng)
+    camera = create_camera("pinhole", [400.0, 400.0, 319.5, 239.5], [], 640, 480)
+    R_lidar_camera = make_T(heading_rotations(1, offset_deg=yaw_deg)[0].T, [0.05, -0.1, 0.02])
+    T_camera_lidar = np.linalg.inv(R_lidar_camera)
+    image = render_view(
+        camera,
+        T_camera_lidar[:3, :3],
+        points,
+        intensities,
+        scale=1.0,
+        fill_radius=3,
+        t_vcam_lidar=T_camera_lidar[:3, 3],
+    ).intensity
+    return camera, image, points, intensities, T_camera_lidar
+
+
+@pytest.mark.parametrize("yaw_deg", [-100.0])
+def test_match_views_finds_the_heading_and_the_pose_with_sift(rng, yaw_deg):
+    camera, image, points, intensities, truth = _self_consistent_pair(rng, yaw_deg)
+    mv = match_views(
+        camera,
+        image,
+        points,
+        intensities,
+        matcher="sift",
+        n_headings=8,
+        camera_normalization="none",
+        lidar_normalization="none",
+        name="p",
+    )
+    # 8 headings, then one view from the pose they give (refine=True)
+    assert len(mv.views) == 9 and 0 <= mv.best < 8 and mv.pooled[-1] == 8
+    best = mv.views[mv.best].view.heading_deg
+    assert abs((best - yaw_deg + 180.0) % 360.0 - 180.0) <= 22.5 + 1e-9
+    refined = mv.views[8].view.heading_deg
+    assert abs((refined - yaw_deg + 180.0) % 360.0 - 180.0) < 1.0
+    corr = mv.correspondences
+    assert len(corr) >= 20 and corr.names == ("p",)
+    guess = estimate_initial_guess(camera, corr.uv_camera, corr.points_lidar, weights=corr.weights)
+    e = pose_errors(guess.T_camera_lidar, truth)
+    assert guess.success
+    assert e["rotation_error_deg"] < TOL["multiview_self_consistent_deg"]["atol"]
+    assert e["translation_error_m"] < TOL["multiview_self_consistent_m"]["atol"]
+    assert "<- best" in mv.summary()
+
+
+def test_match_views_with_a_prior_renders_only_around_it(rng):
+    camera, image, points, intensities, truth = _self_consistent_pair(rng, 150.0)
+    mv = match_views(
+        camera,
+        image,
+        points,
+        intensities,
+        matcher="sift",
+        T_camera_lidar_prior=truth,
+        prior_yaw_offsets_deg=(0.0, 20.0),
+        refine=False,
+        camera_normalization="none",
+        lidar_normalization="none",
+    )
+    assert len(mv.views) == 2 and mv.best == 0
+    assert mv.views[0].ransac_inliers > mv.views[1].ransac_inliers
+
+
+def test_to_matches_round_trips_through_the_stored_lidar_image(rng):
+    from nbcalib.preprocess.lidar_image import make_virtual_camera
+
+    camera, image, points, intensities, _ = _self_consistent_pair(rng, 20.0)
+    mv = match_views(
+        camera,
+        image,
+        points,
+        intensities,
+        matcher="sift",
+        n_headings=6,
+        refine=False,
+        camera_normalization="none",
+        lidar_normalization="none",
+    )
+    vcam, T_vcam_lidar = make_virtual_camera(math.pi)
+    m = mv.to_matches(vcam, T_vcam_lidar)
+    assert m.num_matches == len(mv.correspondences) and m.info["mode"] == "views"
+    # the LiDAR keypoints are the points' pixels in the equirectangular LiDAR image
+    uv, _ = vcam.project(transform_points(T_vcam_lidar, mv.correspondences.points_lidar))
+    np.testing.assert_allclose(m.kpts_lidar, uv, **TOL["transform"])
+    # and initial-guess takes the recorded cloud rows, not a lift through another index map
+    blank = np.full((vcam.height, vcam.width), -1, dtype=np.int32)
+    corr = correspondences_from_matches(m, blank, points, name="x")
+    np.testing.assert_array_equal(corr.points_lidar, mv.correspondences.points_lidar)
+    np.testing.assert_array_equal(corr.uv_camera, mv.correspondences.uv_camera)
+
+
+def test_recorded_rows_must_fit_the_cloud():
+    m = Matches(
+        np.zeros((2, 2)), np.zeros((2, 2)), [0, 1], [1.0, 1.0], info={"kpts1_point_index": [0, 9]}
+    )
+    with pytest.raises(ValueError, match="kpts1_point_index"):
+        correspondences_from_matches(m, np.zeros((4, 4), np.int32), np.zeros((5, 3)))
+
+
+def test_match_views_checks_its_inputs(rng):
+    camera = example_camera("pinhole", 64, 48)
+    with pytest.raises(ValueError, match="camera_image"):
+        match_views(camera, np.zeros((10, 10), np.uint8), np.zeros((5, 3)), np.zeros(5))
+    with pytest.raises(ValueError, match="intensities"):
+        match_views(camera, np.zeros((48, 64), np.uint8), np.zeros((5, 3)), np.zeros(4))
+    # an empty cloud: no view is matched, no correspondences, no error
+    mv = match_views(
+        camera, np.zeros((48, 64), np.uint8), np.zeros((0, 3)), np.zeros(0), matcher="sift"
+    )
+    assert mv.best == -1 and isinstance(mv.correspondences, Correspondences)
+    assert len(mv.correspondences) == 0
+
+
+def test_find_matches_views_then_initial_guess_on_a_work_directory(tmp_path, monkeypatch):
+    """The CLI end to end: views are the default of find-matches; initial-guess reads them."""
+    from nbcalib.cli import main
+    from nbcalib.io.calib_json import AUTO_STAGE
+    from nbcalib.matching.matches import read_matches_json
+    from nbcalib.preprocess.lidar_image import make_virtual_camera, render_lidar_image
+    from nbcalib.preprocess.workdir import WorkDir, make_calib, set_virtual_camera
+
+    rng = np.random.default_rng(3)
+    camera, image, points, intensities, truth = _self_consistent_pair(rng, 60.0)
+    # the work directory stores float32 values: use them from the start
+    points = points.astype(np.float32).astype(np.float64)
+    intensities = intensities.astype(np.float32).astype(np.float64)
+    vcam, T_vcam_lidar = make_virtual_camera(math.pi, equirectangular_size=(720, 360))
+    wd = WorkDir(tmp_path / "work")
+    wd.prepare()
+    wd.write_pair(
+        "000000",
+        image=image,
+        points_lidar=points,
+        intensities=intensities,
+        lidar_image=render_lidar_image(vcam, T_vcam_lidar, points, intensities),
+    )
+    calib = make_calib(camera, ["000000"])
+    set_virtual_camera(calib, vcam, T_vcam_lidar)
+    wd.write_calib(calib)
+    monkeypatch.setenv("NBCALIB_MODEL_DIR", str(tmp_path / "no-models"))
+    args = ["--camera-normalization", "none", "--lidar-normalization", "none"]
+    assert (
+        main(["-q", "find-matches", str(wd.path), "--matcher", "sift", "--views", "6", *args]) == 0
+    )
+    m = read_matches_json(wd.matches_path("000000"))
+    assert m.info["mode"] == "views" and len(m.info["views"]) == 7  # 6 headings + refined
+    assert len(m.info["kpts1_point_index"]) == len(m.kpts_lidar) >= 20
+    assert (wd.path / "000000_matches.png").is_file()
+    assert main(["-q", "initial-guess", str(wd.path)]) == 0
+    e = pose_errors(wd.read_calib().get_T_camera_lidar(AUTO_STAGE), truth)
+    assert e["rotation_error_deg"] < TOL["multiview_self_consistent_deg"]["atol"]
+    assert e["translation_error_m"] < TOL["multiview_self_consistent_m"]["atol"]
