@@ -11,6 +11,8 @@ Stages of the method and where they live:
 - dense clouds, LiDAR images, work directories: :mod:`nbcalib.preprocess`
 - fine registration (NID): :mod:`nbcalib.registration`
 - numba kernels: :mod:`nbcalib.kernels`, with slow references in :mod:`nbcalib.reference`
+- the whole pipeline from Python: :func:`nbcalib.calibrate` (:mod:`nbcalib.api`); from the
+  shell: ``nbcalib run`` and ``nbcalib demo``
 """
 
 from __future__ import annotations
@@ -29,10 +31,14 @@ _SUBMODULES = {
     "metrics",
     "preprocess",
     "registration",
+    "api",
+    "config",
 }
 _EXPORTS = {
     "create_camera": "camera",
     "CameraModel": "camera",
+    "calibrate": "api",
+    "CalibrationResult": "api",
 }
 
 __all__ = sorted([*_SUBMODULES, *_EXPORTS, "__version__"])

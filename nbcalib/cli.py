@@ -29,6 +29,10 @@ COMMAND_MODULES = (
     "calibrate",
     "report",
     "evaluate",
+    "run",
+    "demo",
+    "export",
+    "data",
     "models",
 )
 

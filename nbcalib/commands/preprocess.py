@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from nbcalib.commands._args import add_input_arguments, add_preprocess_arguments
+
 DESCRIPTION = """\
 Turn LiDAR-camera recordings into a work directory: each bag (or the set of plain point-cloud
 files) becomes one pair: a dense cloud (static accumulation for a LiDAR at rest, motion-
@@ -21,7 +23,7 @@ examples:
   nbcalib preprocess run1.bag run2.bag work/ --dynamic      # two pairs, moving spinning LiDAR
   nbcalib preprocess scans/*.bin image.png work/ --camera camera.yaml     # KITTI plain files
   nbcalib preprocess --points lidar.pcd --image image.png work/ \\
-      --camera-model plumb_bob --intrinsics 1450,1450,960,600 --distortion -0.04,0.08,0,0,0
+      --camera-model plumb_bob --intrinsics 1450,1450,960,600 --distortion=-0.04,0.08,0,0,0
   nbcalib preprocess out.bag work/ --points-topic /livox/lidar --image-topic /image
 
 --camera FILE accepts a ROS camera_info YAML, an nbcalib/OpenCV camera YAML/JSON, or a calib.json.
@@ -37,27 +39,8 @@ def add_parser(subparsers, formatter_class) -> argparse.ArgumentParser:
         epilog=EPILOG,
         formatter_class=formatter_class,
     )
-    p.add_argument("inputs", nargs="*", metavar="INPUT... WORKDIR", help="inputs, then WORKDIR")
-    p.add_argument("--points", nargs="+", metavar="FILE", help="point cloud files, in time order")
-    p.add_argument("--image", metavar="FILE", help="camera image for --points")
-    mode = p.add_mutually_exclusive_group()
-    mode.add_argument("--dynamic", action="store_true", help="moving spinning LiDAR (CT-ICP)")
-    mode.add_argument("--static", action="store_true", help="LiDAR at rest (accumulate)")
-    cam = p.add_argument_group("camera (default: the bag's CameraInfo)")
-    cam.add_argument("--camera", metavar="FILE", help="camera file")
-    cam.add_argument("--camera-model", metavar="M", help="pinhole, plumb_bob, fisheye, ...")
-    cam.add_argument("--intrinsics", metavar="A,B,...", help="fx,fy,cx,cy[,xi]")
-    cam.add_argument("--distortion", metavar="A,B,...", help="distortion coefficients")
-    topics = p.add_argument_group("bag topics (default: the only one of each kind)")
-    topics.add_argument("--points-topic", metavar="T")
-    topics.add_argument("--image-topic", metavar="T")
-    topics.add_argument("--camera-info-topic", metavar="T")
-    p.add_argument("--intensity-channel", default="auto", help="'auto': reflectivity > intensity")
-    p.add_argument("--voxel-size", type=float, default=0.002, help="dense cloud voxel, metres")
-    p.add_argument("--min-distance", type=float, default=1.0, help="drop nearer points, metres")
-    p.add_argument("--frame-rate", type=float, default=10.0, help="for files without times, Hz")
-    p.add_argument("--max-scans", type=int, default=None, help="use at most N scans per pair")
-    p.add_argument("--no-equalize", action="store_true", help="keep raw intensities and image")
+    add_input_arguments(p)
+    add_preprocess_arguments(p)
     return p
 
 

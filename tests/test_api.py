@@ -1,0 +1,119 @@
+"""`nbcalib.calibrate`: the whole pipeline from arrays or files, in a few lines."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import nbcalib
+from nbcalib.camera import example_camera
+from nbcalib.errors import InputError
+from nbcalib.io.calib_json import read_calib_json
+from nbcalib.io.image import write_png
+from nbcalib.transforms import invert_T, pose_error, se3_exp
+from tests.test_nid import textured_scene
+
+#: The true extrinsic: a LiDAR with REP 103 axes (x forward) at the camera's centre
+T_TRUE = np.array([[0.0, -1, 0, 0], [0, 0, -1, 0], [1, 0, 0, 0], [0, 0, 0, 1]])
+#: ~5 cm and ~1 degree from the truth
+T_START = se3_exp(np.array([0.04, -0.03, 0.02, 0.012, -0.008, 0.01])) @ T_TRUE
+
+
+@pytest.fixture(scope="module")
+def scene():
+    """Camera, image (float in [0, 1]), points and intensities; the true extrinsic is the
+    identity."""
+    rng = np.random.default_rng(7)
+    camera = example_camera("plumb_bob", 400, 300)
+    image, points, intensities = textured_scene(camera, rng, n=20000, blur=2.5)
+    points = points @ T_TRUE[:3, :3]  # camera frame -> LiDAR frame
+    return camera, image, points, intensities
+
+
+@pytest.fixture(scope="module")
+def result(scene):
+    camera, image, points, intensities = scene
+    return nbcalib.calibrate(points, intensities, image, camera, T_init=T_START, max_outer=2)
+
+
+def test_calibrate_from_arrays_recovers_the_truth(result):
+    dt, dr = pose_error(result.T_lidar_camera, invert_T(T_TRUE))
+    assert dt < 0.005 and dr < 0.05, (dt, dr)
+    np.testing.assert_allclose(result.T_lidar_camera @ result.T_camera_lidar, np.eye(4), atol=1e-12)
+    np.testing.assert_array_equal(result.T_init, T_START)
+    assert result.init_source == "T_init" and result.initial_guess is None
+    assert len(result.xyz_quat) == 7
+    assert "CalibrationResult(T_lidar_camera=" in repr(result)
+
+
+def test_calibrate_reports_quality_figures(result):
+    pytest.importorskip("nbcalib.report")
+    assert result.quality.verdict in ("ok", "suspect")
+
+
+def test_calibrate_keeps_the_intermediate_products(result, scene):
+    history = result.nid_history
+    assert len(history) == len(result.refinement.history) + 1
+    assert history[-1] < history[0]
+    (pair,) = result.pairs
+    assert pair.name == "000000" and pair.matches is None
+    assert pair.image.shape == (300, 400) and pair.image.dtype == np.uint8
+    assert pair.lidar_image.dtype == np.uint8 and pair.lidar_index.dtype == np.int32
+    assert pair.lidar_index.shape == pair.lidar_image.shape
+    filled = pair.lidar_index[pair.lidar_index >= 0]
+    assert filled.size > 1000 and filled.max() < len(pair.points_lidar)
+    assert pair.points_lidar.shape == (len(pair.intensities), 3)
+    assert np.all((pair.intensities >= 0) & (pair.intensities <= 1))
+
+
+@pytest.mark.slow
+def test_calibrate_from_files_and_several_pairs_into_a_workdir(scene, tmp_path):
+    camera, image, points, intensities = scene
+    np.save(tmp_path / "points.npy", np.column_stack([points, intensities]))
+    write_png(tmp_path / "image.png", np.round(image * 255).astype(np.uint8))
+    half = len(points) // 2
+    result = nbcalib.calibrate(
+        [tmp_path / "points.npy", points[half:]],
+        [None, intensities[half:]],
+        [str(tmp_path / "image.png"), np.round(image * 255).astype(np.uint8)],
+        camera,
+        T_init=T_START,
+        workdir=tmp_path / "work",
+        max_outer=2,
+    )
+    assert [p.name for p in result.pairs] == ["000000", "000001"]
+    calib = read_calib_json(tmp_path / "work" / "calib.json")
+    np.testing.assert_allclose(
+        calib.get_T_camera_lidar("T_lidar_camera"), result.T_camera_lidar, atol=1e-6
+    )
+    assert calib.nbcalib["calibration"]["nid_history"] == result.nid_history
+
+
+def test_calibrate_rejects_bad_input(scene, tmp_path):
+    camera, image, points, intensities = scene
+    with pytest.raises(ValueError, match=r"\(N, 3\)"):
+        nbcalib.calibrate(points[:, :2], intensities, image, camera, T_init=T_START)
+    with pytest.raises(ValueError, match="intensities must have shape"):
+        nbcalib.calibrate(points, intensities[:-1], image, camera, T_init=T_START)
+    with pytest.raises(ValueError, match="one image and one intensity array per cloud"):
+        nbcalib.calibrate([points, points], intensities, image, camera, T_init=T_START)
+    with pytest.raises(ValueError, match=r"\[0, 1\]"):
+        nbcalib.calibrate(points, intensities, image * 255, camera, T_init=T_START)
+    with pytest.raises(InputError, match="image not found"):
+        nbcalib.calibrate(points, intensities, tmp_path / "missing.png", camera, T_init=T_START)
+    with pytest.raises(ValueError, match="T_init"):
+        nbcalib.calibrate(points, intensities, image, camera, T_init=np.eye(3))
+
+
+def test_the_api_is_a_lazy_attribute():
+    code = (
+        "import sys, nbcalib; f = nbcalib.calibrate; r = nbcalib.CalibrationResult; "
+        "assert 'numba' not in sys.modules, 'numba imported'; print(f.__module__)"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, check=True
+    ).stdout
+    assert out.strip() == "nbcalib.api"
