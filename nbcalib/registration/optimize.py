@@ -136,7 +136,7 @@ def minimize_lbfgs(
     max_rotation: float = math.radians(2.0),
     max_iterations: int = 50,
     gtol: float = 1e-10,
-    ftol: float = 1e-9,
+    ftol: float = 1e-7,
 ) -> InnerResult:
     """Minimise ``cost(T)`` over ``T = exp(delta) @ T0`` with box-bounded L-BFGS.
 
