@@ -18,7 +18,7 @@ stated 95 % intervals; coverage (per axis and of the error norms) and verdict ac
 reported on the check half. A result counts as *bad* when it is a deliberately bad case or its
 error exceeds 5 cm or 1 degree; the verdict is right when bad <=> "suspect".
 
-Run:   python benchmarks/bench_report_coverage.py [--out /tmp/nbcalib_report_bench] [--quick]
+Run:   python benchmarks/bench_report_coverage.py [--out DIR] [--quick]   (DIR: temp dir by default)
        python benchmarks/bench_report_coverage.py --analyse      # tables from stored cases
 Resumable: stored cases are skipped. The last line printed is one JSON object of the figures.
 """
@@ -31,6 +31,7 @@ import math
 import os
 import pickle
 import platform
+import tempfile
 import time
 from dataclasses import replace
 from pathlib import Path
@@ -415,11 +416,16 @@ def main():
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
-    ap.add_argument("--out", type=Path, default=Path("/tmp/nbcalib_report_bench"))
-    ap.add_argument("--section", type=Path, default=Path("/tmp/nbcalib_sections/report_raw.md"))
+    ap.add_argument(
+        "--out", type=Path, default=Path(tempfile.gettempdir()) / "nbcalib_report_bench"
+    )
+    ap.add_argument(
+        "--section", type=Path, default=None, help="markdown tables (default: OUT/report.md)"
+    )
     ap.add_argument("--quick", action="store_true", help="a handful of cases (smoke test)")
     ap.add_argument("--analyse", action="store_true", help="only analyse stored cases")
     args = ap.parse_args()
+    args.section = args.section or args.out / "report.md"
     if not args.analyse:
         (args.out / "cases").mkdir(parents=True, exist_ok=True)
         cases = case_list(args.quick)

@@ -31,7 +31,7 @@ write --init=-0.1,... when the first value is negative.
 
 def add_parser(subparsers, formatter_class) -> argparse.ArgumentParser:
     """Register ``calibrate``."""
-    from nbcalib.registration.refine import RefineConfig
+    from nbcalib.registration.config import RefineConfig
 
     d = RefineConfig()
     p = subparsers.add_parser(

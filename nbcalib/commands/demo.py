@@ -46,7 +46,7 @@ truth perturbed by 5 cm and 1 degree instead."""
 EPILOG = """\
 examples:
   nbcalib demo                          # into ./nbcalib_demo
-  nbcalib demo /tmp/demo --seed 3
+  nbcalib demo demo_seed3 --seed 3
   nbcalib demo --matcher sift           # force the no-model path
   nbcalib models export                 # once: learned matchers for the automatic guess
 """

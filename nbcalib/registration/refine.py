@@ -36,6 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from nbcalib.camera import CameraModel, create_camera
+from nbcalib.registration.config import RefineConfig
 from nbcalib.registration.nid import MultiNIDCost, NIDCost
 from nbcalib.registration.optimize import InnerResult, minimize_lbfgs, minimize_nelder_mead
 from nbcalib.transforms import invert_T, pose_error, validate_T
@@ -50,85 +51,6 @@ __all__ = [
     "downscale_image",
     "refine",
 ]
-
-
-@dataclass(frozen=True)
-class RefineConfig:
-    """Settings of fine registration; defaults follow the reference toolbox where sensible.
-
-    Attributes
-    ----------
-    optimizer : {"lbfgs", "nelder_mead"}
-        L-BFGS on the smooth NID (reference default: BFGS) or Nelder-Mead on the hard NID (paper).
-    bins : int
-        Histogram bins per axis (16).
-    hidden_point_removal : bool
-        Run the z-buffer visibility test before each outer iteration.
-    depth_margin : float
-        Metres behind the nearest point in a pixel that still count as visible (0.1).
-    window : int
-        Half-size of the pixel neighbourhood of the visibility test (0 = own pixel).
-    max_outer : int
-        Outer iterations at most per pyramid level (10).
-    max_translation, max_rotation_deg : float
-        Trust box of one outer iteration around its start pose (0.2 m, 2 degrees).
-    converge_translation, converge_rotation_deg : float
-        Stop when an outer iteration moves the pose less than both.
-    max_inner : int
-        Iterations (L-BFGS) or, times 40, evaluations (Nelder-Mead) per outer iteration.
-    nelder_mead_init_step : float
-        Initial simplex size in the tangent space (reference: 1e-3).
-    pyramid_levels : int
-        Coarse levels above the full-resolution image (0: full resolution only, as the
-        reference). Level ``k`` halves the image ``k`` times; see the module docstring. Levels
-        whose image would be smaller than ``min_pyramid_size`` pixels (its shorter side) are
-        skipped: on a 400 x 300 image a 100 x 75 level let runs wander metres away.
-    min_pyramid_size : int
-        Shorter side, pixels, of the coarsest level used (240).
-    max_total_translation, max_total_rotation_deg : float
-        Stop, unconverged, when the pose has moved farther than this from the initial guess
-        (0.5 m, 5 degrees): the trust box bounds one outer iteration, not their sum, and on a
-        flat cost (a single real frame) the sum drifted to 0.5-1.8 m.
-    parallel : bool
-        Multithreaded NID kernels (same values; slower in CPU time on a loaded machine).
-    """
-
-    optimizer: str = "lbfgs"
-    bins: int = 16
-    hidden_point_removal: bool = True
-    depth_margin: float = 0.1
-    window: int = 0
-    max_outer: int = 10
-    max_translation: float = 0.2
-    max_rotation_deg: float = 2.0
-    converge_translation: float = 1e-3
-    converge_rotation_deg: float = 0.01
-    max_inner: int = 50
-    nelder_mead_init_step: float = 1e-3
-    pyramid_levels: int = 2
-    min_pyramid_size: int = 240
-    max_total_translation: float = 0.5
-    max_total_rotation_deg: float = 5.0
-    parallel: bool = True
-
-    def __post_init__(self):
-        if self.optimizer not in ("lbfgs", "nelder_mead"):
-            raise ValueError(f"optimizer must be 'lbfgs' or 'nelder_mead', got {self.optimizer!r}")
-        for name in (
-            "max_translation",
-            "max_rotation_deg",
-            "depth_margin",
-            "max_total_translation",
-            "max_total_rotation_deg",
-        ):
-            if not getattr(self, name) >= 0:
-                raise ValueError(f"{name} must be >= 0")
-        if self.max_outer < 1 or self.max_inner < 1:
-            raise ValueError("max_outer and max_inner must be >= 1")
-        if not 0 <= self.pyramid_levels <= 5:
-            raise ValueError(f"pyramid_levels must be in [0, 5], got {self.pyramid_levels}")
-        if self.min_pyramid_size < 16:
-            raise ValueError(f"min_pyramid_size must be >= 16, got {self.min_pyramid_size}")
 
 
 @dataclass
