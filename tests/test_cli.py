@@ -68,3 +68,14 @@ def test_console_script_runs():
         [sys.executable, "-m", "nbcalib", "--version"], capture_output=True, text=True, check=True
     )
     assert out.stdout.startswith("nbcalib ")
+
+
+def test_building_the_parser_loads_no_heavy_module():
+    """`nbcalib data list` or `--help` must not pay for numba, SciPy, OpenCV or onnxruntime."""
+    code = (
+        "import sys; from nbcalib.cli import build_parser; build_parser(); "
+        "print(','.join(m for m in ('numba', 'scipy', 'cv2', 'onnxruntime', 'matplotlib') "
+        "if m in sys.modules))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == ""
