@@ -25,7 +25,6 @@ estimate_initial_guess`.
 
 from __future__ import annotations
 
-import math
 import os
 import time
 from dataclasses import dataclass
@@ -38,6 +37,7 @@ from nbcalib.initial_guess.correspondences import (
     lift_matches,
     pool_correspondences,
 )
+from nbcalib.transforms import rotation_angle_deg
 
 __all__ = ["MultiViewMatches", "ViewMatches", "match_views"]
 
@@ -203,29 +203,14 @@ def _view_matches(
     return ViewMatches(view, m, corr, R_best, support)
 
 
-def _refined_view(
-    camera,
-    image,
-    points,
-    values,
-    corr,
-    scale,
-    matcher,
-    model_dir,
-    ransac_threshold,
-    seed,
-    name,
-    search_radius,
-    fill_radius,
-    splat_pixels_at_1m,
-    median,
-    ransac_iterations,
-    match_options,
-) -> ViewMatches | None:
-    """One more view rendered from the pose the kept correspondences give (None if none)."""
+def _refined_view(camera, corr, ransac_threshold, seed, render, match) -> ViewMatches | None:
+    """One more view rendered from the pose the kept correspondences give (None if none).
+
+    ``render(R_vcam_lidar, t_vcam_lidar)`` and ``match(view)`` are :func:`match_views`'s own
+    rendering and matching, with its settings.
+    """
     from nbcalib.errors import InputError
     from nbcalib.initial_guess.estimate import estimate_initial_guess
-    from nbcalib.matching.views import render_view
 
     try:
         guess = estimate_initial_guess(
@@ -241,36 +226,7 @@ def _refined_view(
     if not guess.success:
         return None
     T = guess.T_camera_lidar
-    view = render_view(
-        camera,
-        T[:3, :3],
-        points,
-        values,
-        scale=scale,
-        t_vcam_lidar=T[:3, 3],
-        fill_radius=fill_radius,
-        splat_pixels_at_1m=splat_pixels_at_1m,
-        median=median,
-    )
-    return _view_matches(
-        camera,
-        image,
-        view,
-        points,
-        matcher,
-        model_dir,
-        search_radius,
-        name,
-        ransac_iterations,
-        ransac_threshold,
-        seed,
-        match_options,
-    )
-
-
-def _rotation_angle_deg(R_a: np.ndarray, R_b: np.ndarray) -> float:
-    c = (np.trace(R_a.T @ R_b) - 1.0) / 2.0
-    return math.degrees(math.acos(min(1.0, max(-1.0, c))))
+    return match(render(T[:3, :3], T[:3, 3]))
 
 
 def match_views(
@@ -401,37 +357,41 @@ def match_views(
         translations = [T_prior[:3, 3] if off == 0.0 else None for off in prior_yaw_offsets_deg]
     else:
         rotations = heading_rotations(n_headings)
-    results: list[ViewMatches] = []
-    for k, R in enumerate(rotations):
-        view = render_view(
+
+    def render(R, t=None):
+        return render_view(
             camera,
             R,
             points,
             values,
             scale=scale,
-            t_vcam_lidar=None if translations is None else translations[k],
+            t_vcam_lidar=t,
             fill_radius=fill_radius,
             splat_pixels_at_1m=splat_pixels_at_1m,
             median=median,
         )
-        if view.fill_fraction < min_fill:
-            continue
-        results.append(
-            _view_matches(
-                camera,
-                image,
-                view,
-                points,
-                matcher,
-                model_dir,
-                search_radius,
-                name,
-                ransac_iterations,
-                ransac_threshold,
-                seed,
-                match_options,
-            )
+
+    def match(view):
+        return _view_matches(
+            camera,
+            image,
+            view,
+            points,
+            matcher,
+            model_dir,
+            search_radius,
+            name,
+            ransac_iterations,
+            ransac_threshold,
+            seed,
+            match_options,
         )
+
+    results: list[ViewMatches] = []
+    for k, R in enumerate(rotations):
+        view = render(R, None if translations is None else translations[k])
+        if view.fill_fraction >= min_fill:
+            results.append(match(view))
     best = -1
     if results:
         best = int(np.argmax([v.ransac_inliers for v in results]))
@@ -448,30 +408,12 @@ def match_views(
                     and v.R_camera_lidar is not None
                     and v.ransac_inliers >= min_pool_support
                 ):
-                    if _rotation_angle_deg(R0, v.R_camera_lidar) < pool_angle_deg:
+                    if rotation_angle_deg(R0.T @ v.R_camera_lidar) < pool_angle_deg:
                         keep.append(k)
         pooled = tuple(keep)
         corr = pool_correspondences([results[k].correspondences for k in keep])
         if refine:
-            extra = _refined_view(
-                camera,
-                image,
-                points,
-                values,
-                corr,
-                scale,
-                matcher,
-                model_dir,
-                ransac_threshold,
-                seed,
-                name,
-                search_radius,
-                fill_radius,
-                splat_pixels_at_1m,
-                median,
-                ransac_iterations,
-                match_options,
-            )
+            extra = _refined_view(camera, corr, ransac_threshold, seed, render, match)
             if extra is not None:
                 results.append(extra)
                 pooled = (*pooled, len(results) - 1)
