@@ -116,6 +116,23 @@ def test_pure_outliers_are_flagged_as_failure(rng):
     assert "FAILED" in guess.summary()
 
 
+def test_wrong_matches_that_pass_the_inlier_count_are_not_distinct():
+    # real KITTI frames: ~10 % chance inliers among wrong matches passed a count-only flag
+    rng = np.random.default_rng(0)
+    camera = example_camera("pinhole", 640, 480)
+    uv = rng.uniform([0, 0], [639, 479], (150, 2))
+    points = rng.uniform([-20, -10, 2], [20, 10, 40], (150, 3))
+    guess = estimate_initial_guess(camera, uv, points, ransac_iterations=2000, min_inliers=3)
+    assert guess.n_inliers >= 3, "the count test alone would pass"
+    assert guess.distinctiveness < 2.0
+    assert not guess.success and "not distinct" in guess.failure
+    # the same correspondences with a real answer among them are distinct
+    truth = default_T_camera_lidar("spinning", 7)
+    c = synthetic_correspondences(camera, truth, 3, n_inliers=60, outlier_fraction=0.8)
+    good = estimate_initial_guess(camera, c.uv_camera, c.points_lidar, ransac_iterations=2000)
+    assert good.success and good.failure == "" and good.distinctiveness > 3.0
+
+
 def test_points_behind_the_camera_count_as_outliers():
     camera = example_camera("plumb_bob", 640, 480)
     truth = _camera_looking(0.0)

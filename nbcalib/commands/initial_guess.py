@@ -250,6 +250,8 @@ def run(args: argparse.Namespace) -> int:
         "ransac_inliers": guess.ransac.n_inliers,
         "inliers": guess.n_inliers,
         "rms_px": None if not np.isfinite(guess.rms_px) else round(guess.rms_px, 4),
+        "support": guess.support,
+        "runner_up": guess.runner_up,
         "success": bool(guess.success),
         "ransac_iterations": args.ransac_iterations,
         "ransac_threshold_px": args.ransac_threshold,
@@ -261,7 +263,7 @@ def run(args: argparse.Namespace) -> int:
     if not guess.success and not args.force:
         hint = "--force writes it anyway" if manual else "pick correspondences with --manual"
         raise InputError(
-            f"initial guess not written: {guess.n_inliers} inliers, need {min_inliers} ({hint})",
+            f"initial guess not written: {guess.failure} ({hint})",
             where,
         )
     calib.set_T_camera_lidar(stage, guess.T_camera_lidar)

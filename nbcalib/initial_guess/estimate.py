@@ -20,7 +20,11 @@ nbcalib adds three things to the reference toolbox's procedure (measured in docs
 Optional per-correspondence ``weights`` (the matcher's confidences) scale the terms of Eq. 1.
 
 The result says how far it can be trusted: the inliers after LM (reprojection error below the
-RANSAC threshold), their RMS error and ``success`` (at least ``min_inliers`` inliers).
+RANSAC threshold), their RMS error and ``success``: at least ``min_inliers`` inliers, and the
+answer must be *distinct*: its rotation must explain ``min_distinctiveness`` (2) times more
+correspondences than any RANSAC rotation more than 5 degrees away. Matches that are mostly wrong
+support many rotations about equally; on real KITTI frames 12-14 inliers of 92-149 wrong
+matches passed the count alone (docs/BENCHMARKS.md).
 """
 
 from __future__ import annotations
@@ -59,6 +63,9 @@ _LO_ROUNDS = 3
 #: many times the next candidate's RANSAC inlier count (and at least ``min_inliers``).
 _EARLY_STOP_RATIO = 3
 
+#: Rotations further apart than this (degrees) are different answers for the success test.
+DISTINCT_ROTATION_DEG = 5.0
+
 #: Fewest correspondences the estimate accepts (a pose has 6 degrees of freedom, each
 #: correspondence gives 2 equations; the reference's manual tool asks for 3 as well).
 MIN_CORRESPONDENCES = 3
@@ -92,6 +99,14 @@ class InitialGuess:
         Where LM started (for the winning candidate).
     candidate : int
         Rank of the winning RANSAC hypothesis among the refined ones (0: the RANSAC winner).
+    support : int
+        Most correspondences a RANSAC rotation within :data:`DISTINCT_ROTATION_DEG` of the final
+        one explains (rotation-only RANSAC's measure).
+    runner_up : int
+        Most correspondences any RANSAC rotation more than :data:`DISTINCT_ROTATION_DEG` away
+        from the final one explains: the best *other* answer the data offer.
+    min_distinctiveness : float
+        ``support / runner_up`` needed for ``success``.
     """
 
     T_camera_lidar: np.ndarray
@@ -105,6 +120,27 @@ class InitialGuess:
     refinement: RefineResult
     T_camera_lidar_start: np.ndarray
     candidate: int
+    support: int = 0
+    runner_up: int = 0
+    min_distinctiveness: float = 0.0
+
+    @property
+    def distinctiveness(self) -> float:
+        """How many times more correspondences the answer explains than the best other rotation."""
+        return self.support / max(self.runner_up, 1)
+
+    @property
+    def failure(self) -> str:
+        """Why ``success`` is False ("" when it is True)."""
+        if self.n_inliers < self.min_inliers:
+            return f"fewer than {self.min_inliers} inliers"
+        if self.distinctiveness < self.min_distinctiveness:
+            return (
+                f"not distinct: a rotation {DISTINCT_ROTATION_DEG:g}+ deg away explains "
+                f"{self.runner_up} correspondences, this one {self.support} "
+                f"(need {self.min_distinctiveness:g}x)"
+            )
+        return ""
 
     @property
     def n_inliers(self) -> int:
@@ -118,11 +154,12 @@ class InitialGuess:
 
     def summary(self) -> str:
         """One line: correspondences, RANSAC and final inliers, RMS, success."""
-        verdict = "ok" if self.success else f"FAILED (fewer than {self.min_inliers} inliers)"
+        verdict = "ok" if self.success else f"FAILED ({self.failure})"
         rms = f"{self.rms_px:.2f} px" if math.isfinite(self.rms_px) else "n/a"
         return (
             f"{self.n_correspondences} correspondences, RANSAC inliers {self.ransac.n_inliers}, "
-            f"final inliers {self.n_inliers} (< {self.threshold:g} px), RMS {rms}: {verdict}"
+            f"final inliers {self.n_inliers} (< {self.threshold:g} px), RMS {rms}, "
+            f"{self.distinctiveness:.1f}x the best other rotation: {verdict}"
         )
 
 
@@ -235,6 +272,7 @@ def estimate_initial_guess(
     seed: int = 0,
     weights=None,
     min_inliers: int = 10,
+    min_distinctiveness: float = 2.0,
     candidates: int = 8,
     local_optimization: bool = True,
     initial_translation: str = "bearing",
@@ -278,6 +316,10 @@ def estimate_initial_guess(
         inlier counts do not use them.
     min_inliers : int, optional
         Final inliers needed for ``success``.
+    min_distinctiveness : float, optional
+        How many times more correspondences the final rotation must explain than the best
+        RANSAC rotation more than :data:`DISTINCT_ROTATION_DEG` from it, for ``success``
+        (0 switches the test off).
     candidates : int, optional
         RANSAC hypotheses refined by LM (the near-field parallax that rotation-only RANSAC
         ignores can make the true rotation only the second or third best).
@@ -367,16 +409,46 @@ def estimate_initial_guess(
     inliers = errors < ransac_threshold
     n_inliers = int(np.count_nonzero(inliers))
     rms = float(np.sqrt(np.mean(errors[inliers] ** 2))) if n_inliers else math.nan
+    R_final = refinement.T_camera_lidar[:3, :3]
+    support, runner_up = _support_and_runner_up(ransac, R_final)
+    distinct = support >= min_distinctiveness * max(runner_up, 1)
     return InitialGuess(
         T_camera_lidar=refinement.T_camera_lidar,
         inliers=inliers,
         errors=errors,
         rms_px=rms,
-        success=n_inliers >= min_inliers,
+        success=n_inliers >= min_inliers and distinct,
         threshold=float(ransac_threshold),
         min_inliers=min_inliers,
         ransac=ransac,
         refinement=refinement,
         T_camera_lidar_start=T_start,
         candidate=rank,
+        support=support,
+        runner_up=runner_up,
+        min_distinctiveness=float(min_distinctiveness),
     )
+
+
+def _support_and_runner_up(ransac: RotationRansacResult, R_final: np.ndarray) -> tuple[int, int]:
+    """Most RANSAC inliers of a hypothesis within / beyond ``DISTINCT_ROTATION_DEG`` of ``R_final``.
+
+    Both in RANSAC's own measure (rotation only), so near-field parallax, which moves the best
+    rotation-only hypothesis a little away from the final pose, counts alike for both.
+    Hypotheses are visited by decreasing inlier count until one of each kind is found.
+    """
+    cos_max = math.cos(math.radians(DISTINCT_ROTATION_DEG))
+    support = runner_up = -1
+    for i in np.argsort(-ransac.counts, kind="stable"):
+        count = int(ransac.counts[i])
+        if count == 0:
+            break
+        # cos of the angle between two rotations: (trace(R1^T R2) - 1) / 2
+        near = (np.sum(ransac.rotation_of(int(i)) * R_final) - 1.0) / 2.0 >= cos_max
+        if near and support < 0:
+            support = count
+        elif not near and runner_up < 0:
+            runner_up = count
+        if support >= 0 and runner_up >= 0:
+            break
+    return max(support, 0), max(runner_up, 0)
