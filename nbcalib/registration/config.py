@@ -49,6 +49,14 @@ class RefineConfig:
         Stop, unconverged, when the pose has moved farther than this from the initial guess
         (0.5 m, 5 degrees): the trust box bounds one outer iteration, not their sum, and on a
         flat cost (a single real frame) the sum drifted to 0.5-1.8 m.
+    orientation_classes : bool
+        Condition the NID on surface orientation: one joint histogram per class of normal
+        direction, cost = point-weighted mean of the class NIDs
+        (:mod:`nbcalib.registration.orientation`). False: one histogram (paper, reference).
+    min_class_points : int
+        Visible points every class of a pair needs (about 20 per histogram cell at 16 bins);
+        otherwise that pair keeps one histogram. Single real scans (KITTI: 4-7 k points a
+        class, noisy normals) stay on the plain NID this way.
     parallel : bool
         Multithreaded NID kernels (same values; slower in CPU time on a loaded machine).
     """
@@ -69,6 +77,8 @@ class RefineConfig:
     min_pyramid_size: int = 240
     max_total_translation: float = 0.5
     max_total_rotation_deg: float = 5.0
+    orientation_classes: bool = True
+    min_class_points: int = 5000
     parallel: bool = True
 
     def __post_init__(self):
@@ -87,5 +97,7 @@ class RefineConfig:
             raise ValueError("max_outer and max_inner must be >= 1")
         if not 0 <= self.pyramid_levels <= 5:
             raise ValueError(f"pyramid_levels must be in [0, 5], got {self.pyramid_levels}")
+        if self.min_class_points < 1:
+            raise ValueError(f"min_class_points must be >= 1, got {self.min_class_points}")
         if self.min_pyramid_size < 16:
             raise ValueError(f"min_pyramid_size must be >= 16, got {self.min_pyramid_size}")

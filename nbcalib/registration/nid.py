@@ -178,24 +178,36 @@ class NIDCost:
 
 
 class MultiNIDCost:
-    """Sum of the NID costs of several LiDAR-camera pairs that share one ``T_camera_lidar``."""
+    """Weighted sum of NID costs that share one ``T_camera_lidar`` (pairs, orientation classes).
 
-    def __init__(self, costs: Sequence[NIDCost]):
+    Parameters
+    ----------
+    costs : sequence of NIDCost
+    weights : sequence of float, optional
+        Weight of each cost (default: all 1, the plain sum over pairs).
+    """
+
+    def __init__(self, costs: Sequence[NIDCost], weights: Sequence[float] | None = None):
         if not costs:
             raise ValueError("MultiNIDCost needs at least one pair")
         self.costs = list(costs)
+        w = np.ones(len(self.costs)) if weights is None else np.asarray(weights, dtype=np.float64)
+        if w.shape != (len(self.costs),) or not np.all(np.isfinite(w)) or np.any(w < 0):
+            raise ValueError(f"weights must be {len(self.costs)} finite values >= 0")
+        self.weights = w
 
     def evaluate(self, T_camera_lidar, *, grad: bool = False) -> NIDEvaluation:
-        """Summed NID (and gradient) over the pairs."""
+        """Weighted NID sum (and gradient) over the costs."""
         evs = [c.evaluate(T_camera_lidar, grad=grad) for c in self.costs]
-        g = np.sum([e.grad for e in evs], axis=0) if grad else None
-        return NIDEvaluation(float(sum(e.value for e in evs)), g, sum(e.n_in_image for e in evs))
+        value = float(sum(w * e.value for w, e in zip(self.weights, evs)))
+        g = np.sum([w * e.grad for w, e in zip(self.weights, evs)], axis=0) if grad else None
+        return NIDEvaluation(value, g, sum(e.n_in_image for e in evs))
 
     def value(self, T_camera_lidar) -> float:
-        """Summed NID."""
+        """Weighted NID sum."""
         return self.evaluate(T_camera_lidar).value
 
     def value_and_grad(self, T_camera_lidar) -> tuple[float, np.ndarray]:
-        """Summed NID and gradient."""
+        """Weighted NID sum and gradient."""
         ev = self.evaluate(T_camera_lidar, grad=True)
         return ev.value, ev.grad

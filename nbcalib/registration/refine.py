@@ -7,6 +7,9 @@ Each outer iteration
    their pixel, or ``window`` pixels around it, are hidden);
 2. minimises the NID summed over the pairs in a trust box around the current pose (L-BFGS on the
    B-spline NID with its exact gradient, or Nelder-Mead on the hard-binned NID as the paper);
+   by default each pair's NID is conditioned on surface orientation (one histogram per class
+   of normal direction, :mod:`nbcalib.registration.orientation`), which removes a shading bias
+   of the plain NID;
 3. stops when the pose moved less than ``converge_translation`` and ``converge_rotation_deg``.
 
 The whole loop runs coarse to fine over an image pyramid (``pyramid_levels``): at level ``k`` the
@@ -67,6 +70,10 @@ class RegistrationPair:
     intensities : ndarray of shape (N,), float in [0, 1]
         Equalised LiDAR intensities.
     name : str, optional
+    classes : ndarray of shape (N,), int, optional
+        Surface-orientation class of each point
+        (:func:`~nbcalib.registration.orientation.orientation_classes`); computed on first use
+        when None.
     """
 
     camera: CameraModel
@@ -74,6 +81,23 @@ class RegistrationPair:
     points_lidar: np.ndarray
     intensities: np.ndarray
     name: str = ""
+    classes: np.ndarray | None = field(default=None, repr=False)
+
+    def orientation_classes(self) -> np.ndarray:
+        """The points' orientation classes, computed once (normals of 16 neighbours)."""
+        if self.classes is None:
+            from nbcalib.registration.orientation import orientation_classes
+
+            pts = np.asarray(self.points_lidar, dtype=np.float64)
+            if len(pts) < 3:
+                self.classes = np.zeros(len(pts), dtype=np.int8)
+            else:
+                # non-finite points are dropped by the cost; give them class 0 here
+                finite = np.isfinite(pts).all(axis=1)
+                self.classes = np.zeros(len(pts), dtype=np.int8)
+                if finite.sum() >= 3:
+                    self.classes[finite] = orientation_classes(pts[finite])
+        return self.classes
 
 
 @dataclass
@@ -191,25 +215,46 @@ def build_cost(
 ):
     """The summed NID over the points of each pair visible from ``T_camera_lidar``.
 
-    Visibility is tested with the full-resolution camera; the cost uses pyramid ``level``.
+    Visibility is tested with the full-resolution camera; the cost uses pyramid ``level``. With
+    ``config.orientation_classes`` each pair's visible points are split by surface orientation
+    and the pair's term is the point-weighted mean of its class NIDs
+    (:mod:`nbcalib.registration.orientation`); the pairs' terms are summed.
     """
     form = "smooth" if config.optimizer == "lbfgs" else "hard"
-    costs, counts = [], []
+    costs, weights, counts = [], [], []
     for pair in pairs:
         keep = visible_subset(pair, T_camera_lidar, config)
         counts.append(int(keep.size))
-        costs.append(
-            NIDCost(
-                downscale_camera(pair.camera, level),
-                downscale_image(pair.image, level),
-                pair.points_lidar[keep],
-                np.asarray(pair.intensities)[keep],
-                bins=config.bins,
-                form=form,
-                parallel=config.parallel,
+        camera = downscale_camera(pair.camera, level)
+        image = downscale_image(pair.image, level)
+        groups = _class_groups(pair, keep, config) if config.orientation_classes else [keep]
+        for group in groups:
+            costs.append(
+                NIDCost(
+                    camera,
+                    image,
+                    pair.points_lidar[group],
+                    np.asarray(pair.intensities)[group],
+                    bins=config.bins,
+                    form=form,
+                    parallel=config.parallel,
+                )
             )
-        )
-    return MultiNIDCost(costs), counts
+            weights.append(group.size / keep.size if keep.size else 1.0)
+    return MultiNIDCost(costs, weights), counts
+
+
+def _class_groups(pair: RegistrationPair, keep: np.ndarray, config: RefineConfig):
+    """``keep`` split by orientation class, or whole when a class has under ``min_class_points``.
+
+    All or nothing: a class too small for its own histogram would have to join another and
+    bring its shading along. The groups keep the pixel order of ``keep``.
+    """
+    classes = pair.orientation_classes()[keep]
+    sizes = np.bincount(classes, minlength=3)
+    if sizes.min() < config.min_class_points:
+        return [keep]
+    return [keep[classes == c] for c in range(len(sizes))]
 
 
 def refine(
