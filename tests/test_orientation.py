@@ -104,11 +104,31 @@ def test_build_cost_is_the_point_weighted_mean_of_class_nids(rng):
     assert len(small.costs) == 1 and small.value(T) == pytest.approx(plain, rel=1e-12)
 
 
-def test_classes_are_computed_once_per_pair(rng):
+def test_classes_are_computed_once_and_only_where_asked(rng, monkeypatch):
     pair, truth = _pair(rng, (3000, 3000, 3000))
-    first = pair.orientation_classes()
-    assert pair.orientation_classes() is first
-    assert np.mean(first == truth) > 0.98
+    pair.points_lidar = pair.points_lidar.copy()
+    pair.points_lidar[5] = np.nan  # the cost drops it; it gets class 0 and no neighbours
+    some = np.arange(0, len(truth), 2)
+    first = pair.orientation_classes(some)
+    assert np.all(pair.classes[some] >= 0) and np.all(pair.classes[1::2] == -1)
+    assert pair.classes[5] == -1 or pair.classes[5] == 0
+    ok = np.isfinite(pair.points_lidar[some]).all(axis=1)
+    assert np.mean(first[ok] == truth[some][ok]) > 0.98
+
+    import nbcalib.registration.orientation as orientation
+
+    def fail(*args, **kwargs):
+        raise AssertionError("normals computed twice")
+
+    monkeypatch.setattr(orientation, "point_normals", fail)
+    assert np.array_equal(pair.orientation_classes(some), first)
+    monkeypatch.undo()
+    everything = pair.orientation_classes()
+    assert np.array_equal(everything[some], first) and np.all(everything >= 0)
+    assert everything[5] == 0
+    # the same classes as computing all at once
+    fresh = RegistrationPair(pair.camera, pair.image, pair.points_lidar, pair.intensities)
+    assert np.array_equal(fresh.orientation_classes(), everything)
 
 
 def test_config_rejects_bad_min_class_points():

@@ -70,10 +70,10 @@ class RegistrationPair:
     intensities : ndarray of shape (N,), float in [0, 1]
         Equalised LiDAR intensities.
     name : str, optional
-    classes : ndarray of shape (N,), int, optional
+    classes : ndarray of shape (N,), int8, optional
         Surface-orientation class of each point
-        (:func:`~nbcalib.registration.orientation.orientation_classes`); computed on first use
-        when None.
+        (:func:`~nbcalib.registration.orientation.orientation_classes`), -1 where not known
+        yet; computed for the visible points on first use when None.
     """
 
     camera: CameraModel
@@ -82,22 +82,39 @@ class RegistrationPair:
     intensities: np.ndarray
     name: str = ""
     classes: np.ndarray | None = field(default=None, repr=False)
+    _tree: object = field(default=None, repr=False, compare=False)
+    _finite: np.ndarray | None = field(default=None, repr=False, compare=False)
 
-    def orientation_classes(self) -> np.ndarray:
-        """The points' orientation classes, computed once (normals of 16 neighbours)."""
+    def orientation_classes(self, indices=None) -> np.ndarray:
+        """Orientation classes of the points ``indices`` (default all), each computed once.
+
+        Normals need a KD-tree of the whole cloud (built on first use) but are computed only
+        for the points asked for: the ones the camera sees.
+        """
+        from nbcalib.registration.orientation import class_of_normals, point_normals
+
+        pts = np.asarray(self.points_lidar, dtype=np.float64)
         if self.classes is None:
-            from nbcalib.registration.orientation import orientation_classes
+            self.classes = np.full(len(pts), -1, dtype=np.int8)
+        idx = np.arange(len(pts)) if indices is None else np.asarray(indices, dtype=np.int64)
+        missing = idx[self.classes[idx] < 0]
+        if missing.size:
+            if self._tree is None:
+                from scipy.spatial import cKDTree
 
-            pts = np.asarray(self.points_lidar, dtype=np.float64)
-            if len(pts) < 3:
-                self.classes = np.zeros(len(pts), dtype=np.int8)
-            else:
-                # non-finite points are dropped by the cost; give them class 0 here
-                finite = np.isfinite(pts).all(axis=1)
-                self.classes = np.zeros(len(pts), dtype=np.int8)
-                if finite.sum() >= 3:
-                    self.classes[finite] = orientation_classes(pts[finite])
-        return self.classes
+                # non-finite points are dropped by the cost; they get class 0 and no neighbours
+                self._finite = np.flatnonzero(np.isfinite(pts).all(axis=1))
+                self._tree = cKDTree(pts[self._finite]) if self._finite.size >= 3 else False
+            ok = np.isin(missing, self._finite) if self._tree is not False else missing < -1
+            self.classes[missing[~ok]] = 0
+            if ok.any():
+                normals = point_normals(
+                    pts[self._finite],
+                    indices=np.searchsorted(self._finite, missing[ok]),
+                    tree=self._tree,
+                )
+                self.classes[missing[ok]] = class_of_normals(normals)
+        return self.classes[idx]
 
 
 @dataclass
@@ -250,7 +267,7 @@ def _class_groups(pair: RegistrationPair, keep: np.ndarray, config: RefineConfig
     All or nothing: a class too small for its own histogram would have to join another and
     bring its shading along. The groups keep the pixel order of ``keep``.
     """
-    classes = pair.orientation_classes()[keep]
+    classes = pair.orientation_classes(keep)
     sizes = np.bincount(classes, minlength=3)
     if sizes.min() < config.min_class_points:
         return [keep]
