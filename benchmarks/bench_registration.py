@@ -118,6 +118,11 @@ def main(argv=None) -> int:
     )
     parser.add_argument("--no-accuracy", action="store_true")
     parser.add_argument("--basin-combo", default="spinning64:omnidir", help="LIDAR:CAMERA")
+    parser.add_argument(
+        "--plain-nid",
+        action="store_true",
+        help="one histogram per pair (orientation_classes=False), for side-by-side runs",
+    )
     args = parser.parse_args(argv)
     combos, seeds, trials, max_points = COMBOS, range(args.seeds), args.trials, args.max_points
     if args.combos:
@@ -130,7 +135,10 @@ def main(argv=None) -> int:
         image_size = (640, 480)
     load = open("/proc/loadavg").read().split()[:3] if os.path.exists("/proc/loadavg") else []
     print(f"load average at start: {' '.join(load)}", file=sys.stderr)
-    config = RefineConfig(parallel=False, pyramid_levels=args.pyramid_levels)
+    classes = not args.plain_nid
+    config = RefineConfig(
+        parallel=False, pyramid_levels=args.pyramid_levels, orientation_classes=classes
+    )
     out = {"load_start": load, "max_points": max_points, "config": vars(args), "accuracy": {}}
 
     # 1. accuracy per combination, one pair and three pairs
@@ -177,7 +185,10 @@ def main(argv=None) -> int:
         out["basin"] = {}
         for optimizer in ("lbfgs", "nelder_mead"):
             cfg = RefineConfig(
-                optimizer=optimizer, parallel=False, pyramid_levels=args.pyramid_levels
+                optimizer=optimizer,
+                parallel=False,
+                pyramid_levels=args.pyramid_levels,
+                orientation_classes=classes,
             )
             for deg, metres in BASIN_LEVELS[: 1 if args.quick else None]:
                 rng = np.random.default_rng([int(deg * 10), 17])

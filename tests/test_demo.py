@@ -37,3 +37,10 @@ def test_demo_without_learned_models_is_honest(tmp_path, monkeypatch, capsys):
     assert ("NOT within the synthetic targets" in out) == (not met)
     # fine registration from 5 cm / 1 degree must at least get much closer
     assert errors["translation_error_m"] < 0.03 and errors["rotation_error_deg"] < 0.5
+
+
+def test_demo_rejects_zero_pairs(tmp_path, capsys):
+    assert main(["demo", str(tmp_path / "demo"), "--pairs", "0"]) != 0
+    err = capsys.readouterr().err
+    assert "--pairs must be >= 1" in err and "Traceback" not in err
+    assert not (tmp_path / "demo" / "synth").exists()

@@ -47,6 +47,7 @@ EPILOG = """\
 examples:
   nbcalib demo                          # into ./nbcalib_demo
   nbcalib demo demo_seed3 --seed 3
+  nbcalib demo --pairs 1                # one pair: faster, less accurate (docs/BENCHMARKS.md)
   nbcalib demo --matcher sift           # force the no-model path
   nbcalib models export                 # once: learned matchers for the automatic guess
 """
@@ -68,6 +69,14 @@ def add_parser(subparsers, formatter_class=argparse.HelpFormatter) -> argparse.A
     p.add_argument("--lidar", default="livox", help="LiDAR model (nbcalib synth --lidar)")
     p.add_argument("--camera", default="pinhole", help="camera model (nbcalib synth --camera)")
     p.add_argument("--image-size", default="640x480", metavar="WxH", help="camera image size")
+    p.add_argument(
+        "--pairs",
+        type=int,
+        default=3,
+        metavar="N",
+        help="LiDAR-camera pairs that share the extrinsic (1: a single pair as plain files; "
+        "more: one ROS 2 bag each)",
+    )
     p.add_argument(
         "--duration", type=float, default=1.0, metavar="SECONDS", help="LiDAR data per pair"
     )
@@ -139,14 +148,24 @@ def run(args: argparse.Namespace) -> int:
     quiet = ["-q"] if getattr(args, "quiet", False) else []
     matcher = resolve_matcher(args.matcher, model_dir)
     learned = [m for m in available_matchers(model_dir) if m != "sift"]
-    print(f"nbcalib demo: {args.lidar} + {args.camera}, seed {args.seed}, matcher {matcher}")
+    print(
+        f"nbcalib demo: {args.lidar} + {args.camera}, {args.pairs} pair(s), seed {args.seed}, "
+        f"matcher {matcher}"
+    )
 
     # 1. a scene with a known answer
     scene = ["--lidar", args.lidar, "--camera", args.camera, "--seed", str(args.seed)]
     scene += ["--image-size", args.image_size, "--duration", str(args.duration)]
+    if args.pairs < 1:
+        raise InputError(f"--pairs must be >= 1, got {args.pairs}")
+    # plain files hold one pair; several pairs go through ROS 2 bags (read without ROS)
+    scene += ["--pairs", str(args.pairs), "--format", "files" if args.pairs == 1 else "bag2"]
     _call(synth, [str(data), *scene])
     T_true = read_ground_truth(data / "ground_truth.json")
-    inputs = [*sorted(str(p) for p in data.glob("pair_*.pcd")), str(data / "pair_000.png")]
+    if args.pairs == 1:
+        inputs = [*sorted(str(p) for p in data.glob("pair_*.pcd")), str(data / "pair_000.png")]
+    else:
+        inputs = sorted(str(p) for p in data.glob("pair_*") if p.is_dir())
     common = ["--camera", str(data / "camera.yaml"), "--voxel-size", str(args.voxel_size)]
     common += ["--matcher", matcher, *quiet]
     if model_dir is not None:
