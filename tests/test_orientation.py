@@ -134,3 +134,23 @@ def test_classes_are_computed_once_and_only_where_asked(rng, monkeypatch):
 def test_config_rejects_bad_min_class_points():
     with pytest.raises(ValueError, match="min_class_points"):
         RefineConfig(min_class_points=0)
+
+
+def test_a_replaced_cloud_gets_fresh_classes(rng):
+    from dataclasses import replace as dc_replace
+
+    pair, _ = _pair(rng, (3000, 3000, 3000))
+    pair.orientation_classes()
+    fewer = dc_replace(
+        pair, points_lidar=pair.points_lidar[:150], intensities=pair.intensities[:150]
+    )
+    classes = fewer.orientation_classes()  # the copied cache belongs to the old cloud
+    assert classes.shape == (150,) and np.all(classes >= 0)
+    pair.points_lidar = pair.points_lidar[::-1].copy()
+    assert np.array_equal(pair.orientation_classes(), fresh_classes(pair))
+
+
+def fresh_classes(pair):
+    return RegistrationPair(
+        pair.camera, pair.image, pair.points_lidar, pair.intensities
+    ).orientation_classes()

@@ -84,6 +84,7 @@ class RegistrationPair:
     classes: np.ndarray | None = field(default=None, repr=False)
     _tree: object = field(default=None, repr=False, compare=False)
     _finite: np.ndarray | None = field(default=None, repr=False, compare=False)
+    _cache_key: tuple | None = field(default=None, repr=False, compare=False)
 
     def orientation_classes(self, indices=None) -> np.ndarray:
         """Orientation classes of the points ``indices`` (default all), each computed once.
@@ -94,6 +95,15 @@ class RegistrationPair:
         from nbcalib.registration.orientation import class_of_normals, point_normals
 
         pts = np.asarray(self.points_lidar, dtype=np.float64)
+        key = (id(self.points_lidar), len(pts))
+        if self._cache_key != key:
+            # a new cloud (dataclasses.replace copies the fields): keep given classes only if
+            # they fit it, and forget the KD-tree of the old one
+            fits = self.classes is not None and len(self.classes) == len(pts)
+            if not fits or self._cache_key is not None:
+                self.classes = None
+            self._tree = self._finite = None
+            self._cache_key = key
         if self.classes is None:
             self.classes = np.full(len(pts), -1, dtype=np.int8)
         idx = np.arange(len(pts)) if indices is None else np.asarray(indices, dtype=np.int64)

@@ -367,9 +367,12 @@ def rejudge(quality: Quality, assess_config: AssessConfig) -> Quality:
         for k in range(n_pairs):
             n = float(q.pixels_covered[k])
             h_inv, _ = _inverse_psd(n * q.pair_hessians[k])
-            # a Newton step of a flat or non-convex pair can be huge: keep it within the range
-            # the curves examine, where the cost was actually looked at
-            offsets[k] = np.clip(-(h_inv @ (n * q.pair_gradients[k])), -spans, spans)
+            # the pair's own optimum: a Newton step along its directions of clear positive
+            # curvature only (a flat or non-convex direction says nothing about where the pair's
+            # minimum is, and its floored inverse sent steps to the clip on good results), kept
+            # within the range the curves examine, where the cost was actually looked at
+            step = -(_newton_inverse(n * q.pair_hessians[k]) @ (n * q.pair_gradients[k]))
+            offsets[k] = np.clip(step, -spans, spans)
             pair_mahalanobis.append(_mahalanobis2(offsets[k], acfg.scale * h_inv))
         q.pair_offsets = offsets
         covariance = covariance + np.cov(offsets.T, ddof=1) / n_pairs
@@ -437,6 +440,20 @@ def _inverse_psd(H: np.ndarray) -> tuple[np.ndarray, int]:
     n_negative = int(np.sum(w <= 0.0))
     w = np.maximum(w, floor)
     return (V / w) @ V.T, n_negative
+
+
+def _newton_inverse(H: np.ndarray, rcond: float = 1e-3) -> np.ndarray:
+    """Pseudo-inverse of a symmetric matrix over its eigenvalues above ``rcond * max``.
+
+    Non-positive and nearly flat directions get no step at all (unlike :func:`_inverse_psd`,
+    which gives them a huge variance).
+    """
+    w, V = np.linalg.eigh(0.5 * (H + H.T))
+    top = float(np.max(w)) if w.size else 0.0
+    if top <= 0.0:
+        return np.zeros_like(H)
+    inv_w = np.where(w > rcond * top, 1.0 / np.where(w > 0, w, 1.0), 0.0)
+    return (V * inv_w) @ V.T
 
 
 def _mahalanobis2(x: np.ndarray, cov: np.ndarray) -> float:
