@@ -8,7 +8,8 @@
   reprojection error (Eq. 1), analytic Jacobians;
 - :mod:`~nbcalib.initial_guess.multiview`: matches against camera-shaped LiDAR views at several
   headings (or around a prior), the view with the best RANSAC support kept;
-- :mod:`~nbcalib.initial_guess.estimate`: both together, with inliers, RMS and a success flag;
+- :mod:`~nbcalib.initial_guess.estimate`: both together, a polish of the winner (translation
+  RANSAC, inlier refits), with inliers, RMS and a success flag;
 - :mod:`~nbcalib.initial_guess.manual` and :mod:`~nbcalib.initial_guess.picker`: hand-picked
   correspondences (file format, interactive picker);
 - :mod:`~nbcalib.initial_guess.synthetic`: correspondences with known answer.
@@ -38,6 +39,7 @@ from nbcalib.initial_guess.estimate import (
     InitialGuess,
     estimate_initial_guess,
     translation_from_bearings,
+    translation_ransac,
 )
 from nbcalib.initial_guess.manual import (
     ManualCorrespondence,
@@ -85,6 +87,7 @@ __all__ = [
     "resolve_manual_correspondences",
     "synthetic_correspondences",
     "translation_from_bearings",
+    "translation_ransac",
     "usable_correspondences",
     "write_manual_correspondences",
 ]
