@@ -21,7 +21,7 @@ from nbcalib.preprocess.lidar_image import (
 from nbcalib.preprocess.workdir import WorkDir, make_calib
 from nbcalib.registration.refine import RegistrationPair
 from nbcalib.report import AssessConfig, assess, rejudge
-from nbcalib.transforms import se3_exp
+from nbcalib.transforms import se3_exp, se3_log
 from tests.test_nid import textured_scene
 from tests.tolerances import TOL
 
@@ -126,6 +126,80 @@ def test_rejudge_scales_the_intervals(quality_at_truth):
     )
 
 
+class QuadraticCost:
+    """A stand-in for an NID cost: ``0.5 delta^T B delta`` of ``delta = log(T)``."""
+
+    def __init__(self, B):
+        self.B = np.asarray(B, dtype=np.float64)
+
+    def value(self, T):
+        d = se3_log(T)
+        return 0.5 * float(d @ self.B @ d)
+
+
+STEPS = np.array([0.005] * 3 + [np.radians(0.1)] * 3)
+
+
+def _with_eigenvalue(H, direction, value):
+    """``H`` with its eigenvalue along the unit eigenvector ``direction`` set to ``value``."""
+    return H + (value - direction @ H @ direction) * np.outer(direction, direction)
+
+
+def test_a_direction_without_curvature_is_measured_again_from_the_values():
+    from nbcalib.report.quality import _remeasure_flat_directions
+
+    B = np.diag([40.0, 60.0, 20.0, 9e4, 8e4, 7e4])
+    d = np.zeros(6)
+    d[2] = 1.0  # tz: B says 20, the (noisy) gradient differences said -3
+    H, n_again = _remeasure_flat_directions(
+        QuadraticCost(B), np.eye(4), _with_eigenvalue(B, d, -3.0), STEPS, 0.0, 16
+    )
+    assert n_again == 1
+    np.testing.assert_allclose(H, B, rtol=1e-9, atol=1e-9)  # a quadratic: exact at m = 1
+
+
+def test_a_direction_the_values_do_not_rise_along_stays_flat():
+    from nbcalib.report.quality import _remeasure_flat_directions
+
+    B = np.diag([40.0, 60.0, 0.0, 9e4, 8e4, 7e4])  # no rise along tz at any scale
+    d = np.zeros(6)
+    d[2] = 1.0
+    H, n_again = _remeasure_flat_directions(
+        QuadraticCost(B), np.eye(4), _with_eigenvalue(B, d, -3.0), STEPS, 0.0, 16
+    )
+    assert n_again == 1
+    assert np.linalg.eigvalsh(H)[0] == pytest.approx(-3.0)
+    # with the re-measurement switched off nothing changes
+    H_off, n_off = _remeasure_flat_directions(
+        QuadraticCost(B), np.eye(4), _with_eigenvalue(B, d, -3.0), STEPS, 0.0, 0
+    )
+    assert n_off == 0 and np.linalg.eigvalsh(H_off)[0] == pytest.approx(-3.0)
+
+
+def test_a_noisy_negative_curvature_at_a_good_result_is_not_a_flat_cost(pair, monkeypatch):
+    # on demo-sized pairs the gradient differences of a weak direction are within the cost's
+    # sub-pixel roughness and came out negative on good results: simulate that on the smallest
+    # eigen-direction of the real Hessian, whose NID values do rise
+    from nbcalib.report import quality as quality_module
+
+    true_hessian = quality_module._hessian
+
+    def noisy_hessian(cost, T, steps):
+        H = true_hessian(cost, T, steps)
+        w, V = np.linalg.eigh(H)
+        return _with_eigenvalue(H, V[:, 0], -0.5 * abs(w[0]))
+
+    reference = assess([pair], np.eye(4))
+    monkeypatch.setattr(quality_module, "_hessian", noisy_hessian)
+    q = assess([pair], np.eye(4))
+    assert q.pair_remeasured.tolist() == [1]
+    assert q.verdict == "ok", q.reasons
+    u, ref = q.uncertainty, reference.uncertainty
+    # the re-measured curvature (second differences of values) is of the size of the true one
+    assert 0.5 < u["translation_total_cm"] / ref["translation_total_cm"] < 2.0
+    assert 0.5 < u["rotation_total_deg"] / ref["rotation_total_deg"] < 2.0
+
+
 def test_assess_rejects_programming_errors(pair):
     with pytest.raises(ValueError, match="at least one"):
         assess([], np.eye(4))
@@ -133,6 +207,8 @@ def test_assess_rejects_programming_errors(pair):
         assess([pair], np.full((4, 4), np.nan))
     with pytest.raises(ValueError, match="curve_samples"):
         AssessConfig(curve_samples=10)
+    with pytest.raises(ValueError, match="max_curvature_scale"):
+        AssessConfig(max_curvature_scale=-1)
 
 
 def test_lidar_edge_points_mark_the_near_side_of_a_depth_step():
