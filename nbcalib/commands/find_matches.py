@@ -25,8 +25,8 @@ in WORKDIR (after 'nbcalib preprocess'); writes <name>_matches.json (the referen
 format, read by 'nbcalib initial-guess') and <name>_matches.png (the matches drawn).
 
 Matchers: learned ones run through onnxruntime once exported with 'nbcalib models export'
-(aliked-lightglue, disk-lightglue, xfeat-lighterglue); 'sift' (OpenCV SIFT + ratio test) always
-runs. 'auto' takes the best exported one, else SIFT, and says which it used.
+(xfeat-lighterglue, aliked-lightglue, disk-lightglue); 'sift' (OpenCV SIFT + ratio test) always
+runs. 'auto' takes the first exported one in that order, else SIFT, and says which it used.
 
 By default the camera image is matched against camera-shaped LiDAR views (the dense cloud
 rendered through the camera's own model at the LiDAR's resolution) at --views headings around
@@ -49,7 +49,7 @@ def add_parser(subparsers, formatter_class=argparse.HelpFormatter) -> argparse.A
     """Register ``find-matches`` on the ``nbcalib`` subcommand parser."""
     from nbcalib.matching.preprocess import NORMALIZATIONS
 
-    matchers = ("auto", "aliked-lightglue", "disk-lightglue", "xfeat-lighterglue", "sift")
+    matchers = ("auto", "xfeat-lighterglue", "aliked-lightglue", "disk-lightglue", "sift")
     parser = subparsers.add_parser(
         "find-matches",
         help="keypoint matches between camera and LiDAR images (learned, or SIFT)",
