@@ -364,6 +364,7 @@ def analyse(out: Path, section: Path | None) -> dict:
         # cases stored before Quality.pair_remeasured existed (none was measured again)
         q = record["quality"]
         q.__dict__.setdefault("pair_remeasured", np.zeros(len(q.names), dtype=np.int64))
+        q.__dict__.setdefault("pair_hessians_raw", q.pair_hessians)
         records.append(record)
     if not records:
         raise SystemExit(f"no stored cases in {out / 'cases'}")

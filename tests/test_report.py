@@ -200,6 +200,35 @@ def test_a_noisy_negative_curvature_at_a_good_result_is_not_a_flat_cost(pair, mo
     assert 0.5 < u["rotation_total_deg"] / ref["rotation_total_deg"] < 2.0
 
 
+def test_per_pair_optima_take_no_step_along_re_measured_directions(pair, monkeypatch):
+    # the per-pair optimum is the minimum of the gradient's quadratic model; along a direction
+    # whose gradient differences showed no positive curvature that model has none, even when the
+    # values (and so the uncertainty) give the direction a curvature
+    from nbcalib.report import quality as quality_module
+    from nbcalib.report.quality import _newton_inverse
+
+    true_hessian = quality_module._hessian
+    flipped = []
+
+    def noisy_hessian(cost, T, steps):
+        H = true_hessian(cost, T, steps)
+        v = np.linalg.eigh(H)[1][:, 0]
+        flipped.append(v)
+        return _with_eigenvalue(H, v, -abs(v @ H @ v))
+
+    monkeypatch.setattr(quality_module, "_hessian", noisy_hessian)
+    T = se3_exp(np.array([0.01, -0.005, 0.008, 0.002, 0.0, -0.001]))  # off the minimum
+    q = assess([pair, make_pair(2, name="b")], T)
+    assert q.pair_remeasured.tolist() == [1, 1]
+    for k, v in enumerate(flipped):
+        assert v @ q.pair_hessians[k] @ v > 0.0  # the uncertainty uses the values' curvature
+        assert abs(q.pair_offsets[k] @ v) < 1e-9
+        # a step through the re-measured Hessian would move along v
+        n = q.pixels_covered[k]
+        step = -(_newton_inverse(n * q.pair_hessians[k]) @ (n * q.pair_gradients[k]))
+        assert abs(step @ v) > 1e-5
+
+
 def test_assess_rejects_programming_errors(pair):
     with pytest.raises(ValueError, match="at least one"):
         assess([], np.eye(4))

@@ -194,6 +194,9 @@ class Quality:
         curvature measured again from the NID values (module docstring).
     pair_remeasured : ndarray of shape (K,), int64
         How many eigen-directions of each pair's Hessian were measured again that way.
+    pair_hessians_raw : ndarray of shape (K, 6, 6)
+        The same Hessians from the gradient differences alone, before that; the per-pair
+        optima (Newton steps of the gradient's own quadratic model) use them.
     config : AssessConfig
     """
 
@@ -217,6 +220,7 @@ class Quality:
     pair_remeasured: np.ndarray = field(
         default_factory=lambda: np.zeros(0, dtype=np.int64), repr=False
     )
+    pair_hessians_raw: np.ndarray = field(default_factory=lambda: np.zeros((0, 6, 6)), repr=False)
     verdict: str = "ok"
     reasons: list[str] = field(default_factory=list)
     config: AssessConfig = field(default_factory=AssessConfig, repr=False)
@@ -316,7 +320,8 @@ def assess(
     T = validate_T(np.asarray(T_camera_lidar, dtype=np.float64), "T_camera_lidar")
     steps = np.array([acfg.hessian_translation] * 3 + [math.radians(acfg.hessian_rotation_deg)] * 3)
 
-    costs, nids, visible, pixels, grads, hessians, remeasured = [], [], [], [], [], [], []
+    costs, nids, visible, pixels, grads = [], [], [], [], []
+    hessians, raw_hessians, remeasured = [], [], []
     for pair in pairs:
         cost, counts = build_cost([pair], T, rcfg)
         value, grad = cost.value_and_grad(T)
@@ -324,12 +329,14 @@ def assess(
         pixels.append(_pixels_covered(pair, T, rcfg))
         nids.append(value)
         grads.append(grad)
-        H, n_again = np.zeros((6, 6)), 0
+        H_raw = _hessian(cost, T, steps) if counts[0] > 0 else np.zeros((6, 6))
+        H, n_again = H_raw, 0
         if counts[0] > 0:
             H, n_again = _remeasure_flat_directions(
-                cost, T, _hessian(cost, T, steps), steps, value, acfg.max_curvature_scale
+                cost, T, H_raw, steps, value, acfg.max_curvature_scale
             )
         hessians.append(H)
+        raw_hessians.append(H_raw)
         remeasured.append(n_again)
         costs.append(cost)
 
@@ -357,6 +364,7 @@ def assess(
         uncertainty={},
         pair_gradients=np.array(grads, dtype=np.float64),
         pair_hessians=np.array(hessians, dtype=np.float64),
+        pair_hessians_raw=np.array(raw_hessians, dtype=np.float64),
         pair_remeasured=np.array(remeasured, dtype=np.int64),
     )
     return rejudge(quality, acfg)
@@ -390,14 +398,19 @@ def rejudge(quality: Quality, assess_config: AssessConfig) -> Quality:
     if n_pairs >= 2:
         spans = np.array([acfg.curve_translation] * 3 + [math.radians(acfg.curve_rotation_deg)] * 3)
         offsets = np.empty((n_pairs, 6))
+        raw = q.pair_hessians_raw if len(q.pair_hessians_raw) == n_pairs else q.pair_hessians
         for k in range(n_pairs):
             n = float(q.pixels_covered[k])
             h_inv, _ = _inverse_psd(n * q.pair_hessians[k])
             # the pair's own optimum: a Newton step along its directions of clear positive
             # curvature only (a flat or non-convex direction says nothing about where the pair's
             # minimum is, and its floored inverse sent steps to the clip on good results), kept
-            # within the range the curves examine, where the cost was actually looked at
-            step = -(_newton_inverse(n * q.pair_hessians[k]) @ (n * q.pair_gradients[k]))
+            # within the range the curves examine, where the cost was actually looked at. The
+            # step is the minimum of the gradient's own quadratic model, so it takes the
+            # curvature from the gradient differences: along a direction re-measured from the
+            # values that model has no minimum (demo seed 2: a 3.4 cm step along tz there called
+            # a good pair disagreeing)
+            step = -(_newton_inverse(n * raw[k]) @ (n * q.pair_gradients[k]))
             offsets[k] = np.clip(step, -spans, spans)
             pair_mahalanobis.append(_mahalanobis2(offsets[k], acfg.scale * h_inv))
         q.pair_offsets = offsets
