@@ -18,7 +18,10 @@
 #    the index map turns each LiDAR keypoint into a 3D point: a 2D-3D correspondence;
 # 2. **rotation-only RANSAC**: most points are far compared with the LiDAR-camera offset, so a
 #    rotation alone nearly explains them; two correspondences fix a rotation;
-# 3. **Levenberg-Marquardt** with a Cauchy kernel on the reprojection error gives the full pose.
+# 3. **Levenberg-Marquardt** with a Cauchy kernel on the reprojection error gives the full pose;
+# 4. **polish** (nbcalib's addition): with most matches wrong, their pull on a weakly
+#    constrained direction moves the minimum of step 3, so a translation-only RANSAC for the
+#    found rotation and LM refits of the inliers finish the job.
 #
 # We first look at steps 2-3 on correspondences with a known answer, then run the whole chain
 # on a synthetic pair.
@@ -34,10 +37,12 @@ from nbcalib.initial_guess import (
     estimate_initial_guess,
     match_views,
     synthetic_correspondences,
+    translation_ransac,
 )
 from nbcalib.metrics import pose_errors
 from nbcalib.preprocess.intensity import equalize_image, equalize_point_intensities
 from nbcalib.synthetic import RigConfig, default_T_camera_lidar, generate_sequence
+from nbcalib.transforms import make_T
 
 QUICK = os.environ.get("NBCALIB_NOTEBOOK_QUICK") == "1"
 
@@ -65,6 +70,41 @@ ax.hist(np.clip(guess.errors, 0, 50), bins=100)
 ax.axvline(guess.threshold, color="r")
 ax.set_xlabel("reprojection error [px] (clipped at 50)")
 ax.set_ylabel("correspondences")
+
+# %% [markdown]
+# ### Why the polish step
+#
+# A camera that sees only far points (8-50 m, a street) constrains the translation along its
+# axis weakly. We start LM 1.3 m off along that axis, as the Cauchy fit over all
+# correspondences can end on real matcher output, and polish: the translation RANSAC finds the
+# translation that explains the most correspondences, the refit keeps it.
+
+# %%
+street_camera = example_camera("plumb_bob", 1280, 960)
+street_truth = default_T_camera_lidar("spinning", 3)
+s = synthetic_correspondences(
+    street_camera, street_truth, 5, n_inliers=80, outlier_fraction=0.8, range_m=(8.0, 50.0)
+)
+pulled = make_T(street_truth[:3, :3], street_truth[:3, 3] + [0.0, 0.0, -1.3])
+t, n = translation_ransac(
+    street_camera,
+    pulled[:3, :3],
+    s.uv_camera,
+    s.points_lidar,
+    street_camera.unproject(s.uv_camera),
+    t_start=pulled[:3, 3],
+)
+print("pulled start:", pose_errors(pulled, street_truth))
+print(f"translation RANSAC: {n} inliers,", pose_errors(make_T(pulled[:3, :3], t), street_truth))
+for polish in (False, True):
+    g = estimate_initial_guess(street_camera, s.uv_camera, s.points_lidar, polish=polish)
+    print(f"estimate, polish={polish}:", pose_errors(g.T_camera_lidar, street_truth))
+
+# %% [markdown]
+# From these synthetic outliers (random pairings) both estimates end within a centimetre: Eq. 1
+# over all correspondences is pulled only by *structured* wrong matches, as real matchers make
+# them. On two of the 35 synthetic LiDAR-camera pairs of docs/BENCHMARKS.md it ended 1.3 m and
+# 1.4 degrees off, and the polish brought them to 8 cm and 0.86 degrees.
 
 # %% [markdown]
 # ## The whole chain on a synthetic pair
