@@ -59,7 +59,9 @@ from nbcalib.synthetic import default_T_camera_lidar
 from nbcalib.transforms import make_T
 
 PROCEDURES = {
-    "reference": dict(candidates=1, local_optimization=False, initial_translation="zero"),
+    "reference": dict(
+        candidates=1, local_optimization=False, initial_translation="zero", polish=False
+    ),
     "nbcalib": {},
 }
 RANGES = {"street": (2.0, 40.0), "room": (1.0, 10.0)}
