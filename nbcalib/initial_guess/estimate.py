@@ -445,9 +445,9 @@ def estimate_initial_guess(
     min_inliers : int, optional
         Final inliers needed for ``success``.
     min_distinctiveness : float, optional
-        How many times more correspondences the final rotation must explain than the best
-        RANSAC rotation more than :data:`DISTINCT_ROTATION_DEG` from it, for ``success``
-        (0 switches the test off).
+        How many times more correspondences the final pose must explain than the best pose
+        rotated more than :data:`DISTINCT_ROTATION_DEG` from it (module docstring), for
+        ``success`` (0 switches the test off).
     candidates : int, optional
         RANSAC hypotheses refined by LM (the near-field parallax that rotation-only RANSAC
         ignores can make the true rotation only the second or third best).
@@ -465,7 +465,8 @@ def estimate_initial_guess(
     polish_kernel_width : float, optional
         Cauchy kernel width of the polish refits, pixels.
     translation_iterations : int, optional
-        Hypotheses of the polish step's translation RANSAC.
+        Hypotheses of each translation RANSAC (the polish step's, and the runner-up poses' of
+        the distinctiveness test).
     parallel : bool, optional
         Run RANSAC on all threads (same result).
 
@@ -561,17 +562,19 @@ def estimate_initial_guess(
     rms = float(np.sqrt(np.mean(errors[inliers] ** 2))) if n_inliers else math.nan
     R_final = T_final[:3, :3]
     support = n_inliers
-    runner_up = _runner_up(
-        camera,
-        ransac,
-        R_final,
-        uv_u,
-        points_u,
-        bearings_u,
-        threshold=ransac_threshold,
-        seed=seed,
-        iterations=translation_iterations,
-    )
+    runner_up = 0
+    if min_distinctiveness > 0:
+        runner_up = _runner_up(
+            camera,
+            ransac,
+            R_final,
+            uv_u,
+            points_u,
+            bearings_u,
+            threshold=ransac_threshold,
+            seed=seed,
+            iterations=translation_iterations,
+        )
     distinct = support >= min_distinctiveness * max(runner_up, 1)
     return InitialGuess(
         T_camera_lidar=T_final,
