@@ -617,20 +617,11 @@ def _runner_up(
     them (:func:`translation_ransac`); their full-pose inlier counts are compared, in the same
     measure as the final pose's inliers.
     """
-    cos_far = math.cos(math.radians(DISTINCT_ROTATION_DEG))
-    cos_apart = math.cos(math.radians(1.0))
-
-    def cos_angle(R1, R2):  # cos of the angle between two rotations: (trace(R1^T R2) - 1) / 2
-        return (np.sum(R1 * R2) - 1.0) / 2.0
-
-    chosen, best = [], 0
-    for i in np.argsort(-ransac.counts, kind="stable"):
-        if ransac.counts[i] == 0 or len(chosen) == _RUNNER_UP_CANDIDATES:
-            break
-        R = ransac.rotation_of(int(i))
-        if cos_angle(R, R_final) >= cos_far or any(cos_angle(R, Q) >= cos_apart for Q in chosen):
-            continue
-        chosen.append(R)
+    others = ransac.ranked_hypotheses(
+        _RUNNER_UP_CANDIDATES, min_inliers=1, away_from=R_final, away_deg=DISTINCT_ROTATION_DEG
+    )
+    best = 0
+    for _, _, R in others:
         _, n = translation_ransac(
             camera, R, uv, points, bearings, threshold=threshold, iterations=iterations, seed=seed
         )

@@ -95,12 +95,19 @@ class RotationRansacResult:
         return out
 
     def ranked_hypotheses(
-        self, max_count: int, *, min_separation_deg: float = 1.0, min_inliers: int = 2
+        self,
+        max_count: int,
+        *,
+        min_separation_deg: float = 1.0,
+        min_inliers: int = 2,
+        away_from=None,
+        away_deg: float = 0.0,
     ) -> list[tuple[int, int, np.ndarray]]:
         """The best hypotheses with distinct rotations, best first.
 
         Hypotheses are taken by decreasing inlier count (lower iteration first on ties); one
-        within ``min_separation_deg`` of a rotation already taken is skipped.
+        within ``min_separation_deg`` of a rotation already taken is skipped, and so is one
+        within ``away_deg`` of the rotation ``away_from`` (when given).
 
         Parameters
         ----------
@@ -110,6 +117,11 @@ class RotationRansacResult:
             Smallest angle between two returned rotations, degrees.
         min_inliers : int, optional
             Hypotheses with fewer inliers are not returned.
+        away_from : array_like of shape (3, 3), optional
+            A rotation whose neighbourhood is left out (e.g. the answer, to find the best
+            *other* one).
+        away_deg : float, optional
+            Radius of that neighbourhood, degrees.
 
         Returns
         -------
@@ -118,6 +130,7 @@ class RotationRansacResult:
         """
         order = np.lexsort((np.arange(self.iterations), -self.counts))
         cos_min = np.cos(np.radians(min_separation_deg))
+        cos_away = np.cos(np.radians(away_deg))
         taken: list[tuple[int, int, np.ndarray]] = []
         for i in order:
             count = int(self.counts[i])
@@ -125,6 +138,8 @@ class RotationRansacResult:
                 break
             R = self.rotation_of(int(i))
             # cos of the angle between two rotations: (trace(R1^T R2) - 1) / 2
+            if away_from is not None and (np.sum(R * away_from) - 1.0) / 2.0 >= cos_away:
+                continue
             if all((np.sum(R * R_t) - 1.0) / 2.0 < cos_min for _, _, R_t in taken):
                 taken.append((int(i), count, R))
         return taken
