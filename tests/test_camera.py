@@ -430,3 +430,68 @@ def test_camera_info_from_message_object():
         width=10, height=10, distortion_model="plumb_bob", D=[0.1, 0, 0, 0, 0, 0, 0, 0], K=np.eye(3)
     )
     assert cam.distortion_coeffs.size == 5
+
+
+def _nearest_pixels_reference(cam, T, pts):
+    """Slow: project each point, round with floor(u + 0.5), -1 when invalid or off-image."""
+    with np.errstate(invalid="ignore"):
+        pc = pts @ T[:3, :3].T + T[:3, 3]
+    uv, valid = cam.project(pc)
+    out = np.full(len(pts), -1, dtype=np.int64)
+    for i, ((u, v), ok) in enumerate(zip(uv, valid)):
+        if ok:
+            iu, iv = math.floor(u + 0.5), math.floor(v + 0.5)
+            if 0 <= iu < cam.width and 0 <= iv < cam.height:
+                out[i] = iv * cam.width + iu
+    return out
+
+
+@pytest.mark.parametrize("name", CAMERA_MODELS)
+def test_nearest_pixels_matches_project_point(name, rng):
+    """The vectorised block projection gives the pixels and validity of project_point, also on
+    pixel borders, behind the camera, beyond the distortion fold and for non-finite points."""
+    from nbcalib.kernels.projection import nearest_pixels
+    from nbcalib.transforms import se3_exp
+
+    cam = make(name)
+    inside, _ = points_in_view(cam, rng, 1500)
+    # points whose pixels lie exactly on rounding borders (u + 0.5 an integer) and image edges
+    uv = np.column_stack(
+        [rng.integers(0, cam.width, 300) - 0.5, rng.integers(0, cam.height, 300) + 0.0]
+    )
+    uv[:20, 0] = cam.width - 0.5
+    uv[20:40, 1] = cam.height - 0.5
+    b = cam.unproject(uv)
+    border = b[np.isfinite(b[:, 0])] * 3.0
+    wide = rng.normal(size=(800, 3)) * [3.0, 3.0, 1.0]  # many behind the camera or far outside
+    odd = np.array(
+        [[np.nan, 0, 1], [0, 0, -5], [0, 0, 0], [np.inf, 1, 1], [1, -np.inf, 2], [0, 1, 0]]
+    )
+    pts = np.concatenate([inside, border, wide, odd])
+    for T in (np.eye(4), se3_exp(np.array([0.02, -0.01, 0.03, 0.01, -0.02, 0.015]))):
+        expected = _nearest_pixels_reference(cam, T, pts)
+        out = np.empty(len(pts), dtype=np.int32)
+        x, y, z = (np.ascontiguousarray(pts[:, k]) for k in range(3))
+        nearest_pixels(cam.model_id, cam.params, T, x, y, z, cam.width, cam.height, -1, out)
+        assert np.array_equal(out, expected)
+        assert (out >= 0).sum() > 1000
+        assert (out < 0).sum() > (2 if name == "equirectangular" else 100)
+
+
+def test_nearest_pixels_beyond_fold_and_cap():
+    from nbcalib.kernels.projection import nearest_pixels
+
+    barrel = create_camera("plumb_bob", [500, 500, 320, 240], [-0.4, 0.0, 0, 0, 0], 640, 480)
+    r_fold = 1 / math.sqrt(3 * 0.4)
+    omni = create_camera("omnidir", [300, 300, 320, 240, 0.5], [], 640, 480)
+    zmin = -0.5
+    cases = [
+        (barrel, [[0.9 * r_fold, 0, 1], [1.1 * r_fold, 0, 1], [3 * r_fold, 0, 1]]),
+        (omni, [[math.sqrt(1 - (zmin + 0.01) ** 2), 0, zmin + 0.01], [0.87, 0, -0.51]]),
+    ]
+    for cam, pts in cases:
+        pts = np.asarray(pts, dtype=np.float64)
+        out = np.empty(len(pts), dtype=np.int32)
+        x, y, z = (np.ascontiguousarray(pts[:, k]) for k in range(3))
+        nearest_pixels(cam.model_id, cam.params, np.eye(4), x, y, z, cam.width, cam.height, -1, out)
+        assert np.array_equal(out, _nearest_pixels_reference(cam, np.eye(4), pts))

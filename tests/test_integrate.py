@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from numba_regions import parallel_regions
 from numpy.testing import assert_allclose
 from tolerances import TOL
 
@@ -296,6 +297,10 @@ def test_associate_and_normal_equations_match_reference(rng):
     assert_allclose(cost, cost_ref, **TOL["plane_fit_vs_eigh"])
     Hp, gp, cp, up = ct_icp._normal_equations_parallel(source, s, R_b, t_b, t_e, phi, planes, 0.05)
     assert np.array_equal(H, Hp) and np.array_equal(g, gp) and cost == cp and used == up
+    # one parallel region per call each (tests/numba_regions.py says why)
+    assert parallel_regions(ct_icp._associate_parallel, *args, 0.03, planes_parallel) == 1
+    normal_args = (source, s, R_b, t_b, t_e, phi, planes, 0.05)
+    assert parallel_regions(ct_icp._normal_equations_parallel, *normal_args) == 1
 
 
 def test_normal_equations_jacobian_vs_finite_differences(rng):

@@ -16,6 +16,7 @@ from nbcalib.kernels import nid as k
 from nbcalib.reference import nid as ref
 from nbcalib.registration.nid import MultiNIDCost, NIDCost, quantise
 from nbcalib.transforms import se3_exp
+from tests.numba_regions import parallel_regions
 from tests.tolerances import TOL
 
 
@@ -50,28 +51,43 @@ def nasty_points(camera, rng, n=3000):
     return np.concatenate([pts, extra])
 
 
-@pytest.mark.parametrize("model", ["plumb_bob", "fisheye", "omnidir", "equirectangular"])
+@pytest.mark.parametrize("model", CAMERA_MODELS)
 def test_hard_histogram_matches_reference(model, rng):
     cam = example_camera(model, 160, 120 if model != "equirectangular" else 80)
-    pts = nasty_points(cam, rng)
+    # enough points for several blocks per chunk, and a last block that is not full
+    pts = nasty_points(cam, rng, n=k.N_CHUNKS * (2 * k.BLOCK + 123))
     point_bins = rng.integers(0, 16, len(pts)).astype(np.uint8)
     image_bins = rng.integers(0, 16, (cam.height, cam.width)).astype(np.uint8)
     T = se3_exp(np.array([0.01, -0.02, 0.03, 0.01, 0.02, -0.01]))
     expected = ref.joint_histogram_hard(cam, T, pts, point_bins, image_bins, 16)
-    cells = np.empty(len(pts), dtype=np.int32)
+    assert len(pts) > k.N_CHUNKS * 2 * k.BLOCK
+    xyz = np.ascontiguousarray(pts.T)
     for parallel in (False, True):
         got = k.joint_hist_hard(
             cam.model_id,
             cam.params,
             T,
-            pts,
+            xyz,
             point_bins,
             image_bins,
             16,
             parallel=parallel,
-            cells=cells,
+            padded=k.padded_image_bins(image_bins, 16),
         )
         assert np.array_equal(got, expected)
+
+
+def test_nid_kernels_are_one_parallel_region(rng):
+    cam = example_camera("plumb_bob", 64, 48)
+    xyz = np.ascontiguousarray(nasty_points(cam, rng, n=200).T)
+    point_bins = rng.integers(0, 8, xyz.shape[1]).astype(np.uint8)
+    image_bins = rng.integers(0, 8, (48, 64)).astype(np.uint8)
+    T = np.eye(4)
+    padded = k.padded_image_bins(image_bins, 8)
+    common = (cam.model_id, cam.params, T, xyz, point_bins)
+    assert parallel_regions(k._joint_hist_hard_parallel, *common, padded, 64, 48, 8) == 1
+    smooth = (*common, image_bins, 8, k.N_CHUNKS, True)
+    assert parallel_regions(k._joint_hist_smooth_parallel, *smooth) == 1
 
 
 @pytest.mark.parametrize("model", ["plumb_bob", "atan", "omnidir", "equirectangular"])
@@ -83,7 +99,7 @@ def test_smooth_histogram_matches_reference(model, rng):
     T = se3_exp(np.array([0.01, -0.02, 0.03, 0.01, 0.02, -0.01]))
     expected = ref.joint_histogram_smooth(cam, T, pts, point_bins, image_bins, 8)
     hist, _, count = k._joint_hist_smooth(
-        cam.model_id, cam.params, T, pts, point_bins, image_bins, 8, k.N_CHUNKS, False
+        cam.model_id, cam.params, T, pts.T.copy(), point_bins, image_bins, 8, k.N_CHUNKS, False
     )
     assert_allclose(hist, expected, **TOL["kernel_vs_reference"])
     assert_allclose(hist.sum(), count, rtol=1e-12)  # B-spline weights are a partition of unity
@@ -110,7 +126,7 @@ def test_smooth_derivative_matches_reference(model, image_kind, rng):
     expected_d = ref.joint_histogram_smooth_derivative(cam, T, pts, point_bins, image_bins, 8)
     for kernel in (k._joint_hist_smooth, k._joint_hist_smooth_parallel):
         hist, dhist, count = kernel(
-            cam.model_id, cam.params, T, pts, point_bins, image_bins, 8, k.N_CHUNKS, True
+            cam.model_id, cam.params, T, pts.T.copy(), point_bins, image_bins, 8, k.N_CHUNKS, True
         )
         assert_allclose(hist, expected, **TOL["kernel_vs_reference"])
         scale = np.abs(expected_d).max()

@@ -228,16 +228,24 @@ _associate_parallel = jit_parallel(_associate_impl)
 
 def _normal_equations_impl(points, s, R_b, t_b, t_e, phi, planes, robust_scale):
     n = points.shape[0]
-    H_parts = np.zeros((N_CHUNKS, 12, 12))
-    g_parts = np.zeros((N_CHUNKS, 12))
-    cost_parts = np.zeros(N_CHUNKS)
-    used_parts = np.zeros(N_CHUNKS, dtype=np.int64)
+    # per-chunk sums, zeroed by their chunk: an np.zeros here (or an array expression after
+    # the loop) would run as a parallel region of its own, each waking the threads (~50 us)
+    H_parts = np.empty((N_CHUNKS, 12, 12))
+    g_parts = np.empty((N_CHUNKS, 12))
+    cost_parts = np.empty(N_CHUNKS)
+    used_parts = np.empty(N_CHUNKS, dtype=np.int64)
     c2 = robust_scale * robust_scale
     for c in prange(N_CHUNKS):
         E = np.empty((3, 3))
         J = np.empty(12)
         H = H_parts[c]
         g = g_parts[c]
+        for a in range(12):
+            g[a] = 0.0
+            for b in range(12):
+                H[a, b] = 0.0
+        cost_parts[c] = 0.0
+        used_parts[c] = 0
         lo, hi = _chunk_bounds(n, N_CHUNKS, c)
         for i in range(lo, hi):
             a2d2 = planes[i, PLANE_WEIGHT]
@@ -265,13 +273,21 @@ def _normal_equations_impl(points, s, R_b, t_b, t_e, phi, planes, robust_scale):
                     H[a, b] += wa * J[b]
             cost_parts[c] += w * r * r
             used_parts[c] += 1
-    H_total = np.zeros((12, 12))
-    g_total = np.zeros(12)
+    H_total = np.empty((12, 12))
+    g_total = np.empty(12)
+    for a in range(12):
+        total = 0.0
+        for c in range(N_CHUNKS):
+            total += g_parts[c, a]
+        g_total[a] = total
+        for b in range(a, 12):
+            total = 0.0
+            for c in range(N_CHUNKS):
+                total += H_parts[c, a, b]
+            H_total[a, b] = total
     cost = 0.0
     used = 0
     for c in range(N_CHUNKS):
-        H_total += H_parts[c]
-        g_total += g_parts[c]
         cost += cost_parts[c]
         used += used_parts[c]
     for a in range(12):

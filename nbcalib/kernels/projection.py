@@ -623,3 +623,146 @@ def _unproject(model_id, params, uv):
         bearings[i, 2] = bz
         valid[i] = ok
     return bearings, valid
+
+
+# --------------------------------------------------------------------------------------------
+# Nearest pixels of many points at once, written so that LLVM vectorises the loop
+# --------------------------------------------------------------------------------------------
+#
+# project_point() returns early on every invalid case, so a loop over it runs one point at a
+# time. The loops below compute every point's pixel without branches and fold the validity tests
+# into one boolean, for the models whose arithmetic has no library calls (the pinhole family
+# and omnidir); LLVM then runs 8 points per AVX-512 instruction. They evaluate exactly the
+# expressions of the scalar helpers above, in the same order, with IEEE semantics (no
+# fast-math), so every pixel and every validity decision is identical to project_point()
+# followed by floor(u + 0.5) (tested). The other models go through project_point().
+#
+# Rounding: with a = u + 0.5, floor(a) lies in [0, W) exactly when 0 <= a < W (W an integer),
+# and for a >= 0 truncation (int()) equals floor; so no floor() call is needed. Coordinates
+# must be separate 1-D arrays: a strided (N, 3) layout defeats the vectoriser.
+
+
+@jit_inline
+def _pixel_index(fu, fv, ok, width, invalid):
+    """``int(fv) * width + int(fu)`` where ``ok``, else ``invalid`` (invalid values unconverted)."""
+    fu = fu if ok else 0.0
+    fv = fv if ok else 0.0
+    p = np.int32(fv) * np.int32(width) + np.int32(fu)
+    return p if ok else np.int32(invalid)
+
+
+@jit_inline
+def _nearest_pixels_poly_loop(params, omni, rational, T, x, y, z, width, height, invalid, out):
+    """Pinhole family or omnidir (``omni``); ``rational`` False when k4 = k5 = k6 = 0.
+
+    Both flags are constants at each call site below, so numba's inlining leaves LLVM one
+    straight loop per case. Without the rational denominator, ``radial = num`` is what
+    ``num / 1.0`` gives, and the ``den > 0`` test it drops only ever failed for non-finite
+    ``r2``, which the pixel range test rejects as well.
+    """
+    fx = params[P_FX]
+    fy = params[P_FY]
+    cx = params[P_CX]
+    cy = params[P_CY]
+    xi = params[P_XI]
+    k1 = params[P_DIST + 0]
+    k2 = params[P_DIST + 1]
+    p1 = params[P_DIST + 2]
+    p2 = params[P_DIST + 3]
+    k3 = params[P_DIST + 4]
+    k4 = params[P_DIST + 5]
+    k5 = params[P_DIST + 6]
+    k6 = params[P_DIST + 7]
+    limit = params[P_LIMIT]
+    zmin = -min(xi, 1.0 / xi) if xi > 0.0 else 0.0
+    r00, r01, r02, t0 = T[0, 0], T[0, 1], T[0, 2], T[0, 3]
+    r10, r11, r12, t1 = T[1, 0], T[1, 1], T[1, 2], T[1, 3]
+    r20, r21, r22, t2 = T[2, 0], T[2, 1], T[2, 2], T[2, 3]
+    w = float(width)
+    h = float(height)
+    for i in range(x.shape[0]):
+        px = x[i]
+        py = y[i]
+        pz = z[i]
+        X = r00 * px + r01 * py + r02 * pz + t0
+        Y = r10 * px + r11 * py + r12 * pz + t1
+        Z = r20 * px + r21 * py + r22 * pz + t2
+        finite = (X - X == 0.0) & (Y - Y == 0.0) & (Z - Z == 0.0)
+        if omni:  # _omnidir_denominator, then X / d as in _omnidir_value
+            n = math.sqrt(X * X + Y * Y + Z * Z)
+            d = Z + xi * n
+            front = (n > 0.0) & (Z > zmin * n) & (d > 0.0)
+            xn = X / d
+            yn = Y / d
+        else:  # _pinhole_family_value
+            iz = 1.0 / Z
+            front = Z > 0.0
+            xn = X * iz
+            yn = Y * iz
+        # _distort_poly
+        r2 = xn * xn + yn * yn
+        num = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
+        if rational:
+            den = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6))
+            radial = num / den
+            front = front & (den > 0.0)
+        else:
+            radial = num
+        xd = xn * radial + 2.0 * p1 * xn * yn + p2 * (r2 + 2.0 * xn * xn)
+        yd = yn * radial + p1 * (r2 + 2.0 * yn * yn) + 2.0 * p2 * xn * yn
+        fu = (fx * xd + cx) + 0.5
+        fv = (fy * yd + cy) + 0.5
+        ok = finite & front & (r2 <= limit)
+        ok = ok & (fu >= 0.0) & (fu < w) & (fv >= 0.0) & (fv < h)
+        out[i] = _pixel_index(fu, fv, ok, width, invalid)
+
+
+@jit
+def _nearest_pixels_pinhole(params, T, x, y, z, width, height, invalid, out):
+    _nearest_pixels_poly_loop(params, False, False, T, x, y, z, width, height, invalid, out)
+
+
+@jit
+def _nearest_pixels_rational(params, T, x, y, z, width, height, invalid, out):
+    _nearest_pixels_poly_loop(params, False, True, T, x, y, z, width, height, invalid, out)
+
+
+@jit
+def _nearest_pixels_omnidir(params, T, x, y, z, width, height, invalid, out):
+    _nearest_pixels_poly_loop(params, True, False, T, x, y, z, width, height, invalid, out)
+
+
+@jit
+def _nearest_pixels_any(model_id, params, T, x, y, z, width, height, invalid, out):
+    """Any model, one point at a time through :func:`project_point`."""
+    w = float(width)
+    h = float(height)
+    for i in range(x.shape[0]):
+        X = T[0, 0] * x[i] + T[0, 1] * y[i] + T[0, 2] * z[i] + T[0, 3]
+        Y = T[1, 0] * x[i] + T[1, 1] * y[i] + T[1, 2] * z[i] + T[1, 3]
+        Z = T[2, 0] * x[i] + T[2, 1] * y[i] + T[2, 2] * z[i] + T[2, 3]
+        u, v, ok = project_point(model_id, params, X, Y, Z)
+        fu = u + 0.5
+        fv = v + 0.5
+        ok = ok & (fu >= 0.0) & (fu < w) & (fv >= 0.0) & (fv < h)
+        out[i] = _pixel_index(fu, fv, ok, width, invalid)
+
+
+@jit
+def nearest_pixels(model_id, params, T, x, y, z, width, height, invalid, out):
+    """Row-major index ``iv * width + iu`` of each LiDAR point's nearest pixel, or ``invalid``.
+
+    ``x, y, z`` (1-D float arrays, LiDAR frame) are moved by ``T`` (4 x 4, camera <- LiDAR) and
+    projected; ``(iu, iv) = floor((u, v) + 0.5)``; ``invalid`` (e.g. -1, or ``width * height``
+    to index a sentinel after the image) where the projection is invalid or the pixel is
+    outside ``width x height``. ``out`` (int32, same length) is overwritten.
+    """
+    rational = params[P_DIST + 5] != 0.0 or params[P_DIST + 6] != 0.0 or params[P_DIST + 7] != 0.0
+    if model_id <= RATIONAL_POLYNOMIAL and not rational:
+        _nearest_pixels_pinhole(params, T, x, y, z, width, height, invalid, out)
+    elif model_id <= RATIONAL_POLYNOMIAL:
+        _nearest_pixels_rational(params, T, x, y, z, width, height, invalid, out)
+    elif model_id == OMNIDIR:  # its four coefficients are k1 k2 p1 p2: never rational
+        _nearest_pixels_omnidir(params, T, x, y, z, width, height, invalid, out)
+    else:
+        _nearest_pixels_any(model_id, params, T, x, y, z, width, height, invalid, out)

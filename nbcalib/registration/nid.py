@@ -121,13 +121,19 @@ class NIDCost:
         self.bins = int(bins)
         self.form = form
         self.parallel = bool(parallel)
-        self.points = np.ascontiguousarray(pts[finite])
+        # coordinate rows (3, N): the kernels read x, y and z as separate contiguous arrays
+        self.xyz = np.ascontiguousarray(pts[finite].T)
         self.point_bins = quantise(inten[finite], self.bins)
         self.image_bins = quantise(img, self.bins)
-        self._cells = np.empty(self.points.shape[0], dtype=np.int32)  # hard form's pass-1 buffer
+        self._padded = _k.padded_image_bins(self.image_bins, self.bins) if form == "hard" else None
+
+    @property
+    def points(self) -> np.ndarray:
+        """The finite LiDAR points (N, 3) the cost uses (a view of :attr:`xyz`)."""
+        return self.xyz.T
 
     def __len__(self) -> int:
-        return self.points.shape[0]
+        return self.xyz.shape[1]
 
     def evaluate(self, T_camera_lidar, *, grad: bool = False) -> NIDEvaluation:
         """NID at ``T_camera_lidar`` (4 x 4), with the gradient if ``grad`` (smooth form only)."""
@@ -142,12 +148,12 @@ class NIDCost:
                 cam.model_id,
                 cam.params,
                 T,
-                self.points,
+                self.xyz,
                 self.point_bins,
                 self.image_bins,
                 self.bins,
                 parallel=self.parallel,
-                cells=self._cells,
+                padded=self._padded,
             ).astype(np.float64)
             n_in = int(hist.sum())
             value, _ = _k._nid_from_hist(hist, np.zeros((self.bins, self.bins, 6)), False)
@@ -157,7 +163,7 @@ class NIDCost:
             cam.model_id,
             cam.params,
             T,
-            self.points,
+            self.xyz,
             self.point_bins,
             self.image_bins,
             self.bins,
