@@ -7,6 +7,7 @@ since the kernels' speed depends on how the image is read. Wall clock and proces
 threads) are printed side by side with the load average.
 
 Run:  python benchmarks/bench_nid.py [--points 1000000] [--width 1920 --height 1080] [--repeat 5]
+(best of at least --repeat runs, and of as many as fit in half a second)
 The last line printed is one JSON object with points_per_s (hard-binned value, best kernel),
 grad_points_per_s (smooth value + gradient, best kernel) and numpy_ratio, the same with suffix
 _pixel_order, the load average and every row (points/s from wall time; ``*_cpu_s`` seconds).
@@ -30,11 +31,16 @@ from nbcalib.registration.nid import NIDCost
 from nbcalib.transforms import se3_exp
 
 
-def best_time(fn, repeat):
-    """Best wall-clock and best CPU (process, all threads) seconds of ``repeat`` runs."""
+def best_time(fn, repeat, min_seconds=0.5):
+    """Best wall-clock and best CPU (process, all threads) seconds of at least ``repeat`` runs.
+
+    Fast calls are repeated until ``min_seconds`` have passed (a 2 ms kernel gets ~250 runs), so
+    that one slow wake-up of the second core does not decide its figure.
+    """
     fn()  # warm up (compilation, caches)
     wall, cpu = [], []
-    for _ in range(repeat):
+    start = time.perf_counter()
+    while len(wall) < repeat or time.perf_counter() - start < min_seconds:
         t0, c0 = time.perf_counter(), time.process_time()
         fn()
         wall.append(time.perf_counter() - t0)
