@@ -43,7 +43,7 @@ import platform
 import sys
 import tempfile
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -371,6 +371,7 @@ def parse_args(argv=None):
     ap.add_argument("--threads", type=int, default=1, help="numba threads (module docstring)")
     ap.add_argument("--landscape", action="store_true", help="cost along single axes")
     ap.add_argument("--acc-scans", type=int, default=5, help="scans per accumulated cloud")
+    ap.add_argument("--ftol", type=float, default=None, help="RefineConfig.lbfgs_ftol")
     args = ap.parse_args(argv)
     if args.quick:
         args.perturbations = min(args.perturbations, 2)
@@ -390,7 +391,11 @@ def main(argv=None):
     import numba
 
     numba.set_num_threads(args.threads)
-    config = RefineConfig() if args.optimizer is None else RefineConfig(optimizer=args.optimizer)
+    config = RefineConfig()
+    if args.optimizer is not None:
+        config = replace(config, optimizer=args.optimizer)
+    if args.ftol is not None:
+        config = replace(config, lbfgs_ftol=args.ftol)
     offsets = perturbations(args.perturbations, args.seed)
 
     t0 = time.perf_counter()

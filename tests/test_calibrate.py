@@ -135,6 +135,27 @@ def test_refine_config_rejects_bad_pyramid():
         RefineConfig(pyramid_levels=-1)
 
 
+def test_lbfgs_ftol_reaches_the_optimiser(rng):
+    """A tighter relative-reduction stop lets L-BFGS run longer; a bad one is refused."""
+    cam = example_camera("plumb_bob", 160, 120)
+    image, points, intensities = textured_scene(cam, rng, n=4000, blur=1.5)
+    pair = RegistrationPair(cam, image, points, intensities)
+    T_start = se3_exp(np.array([0.01, -0.01, 0.0, 0.004, 0.0, -0.003]))
+    evaluations = {}
+    for ftol in (1e-3, 1e-12):
+        config = RefineConfig(
+            pyramid_levels=0,
+            hidden_point_removal=False,
+            parallel=False,
+            lbfgs_ftol=ftol,
+            max_outer=1,
+        )
+        evaluations[ftol] = refine([pair], T_start, config).history[0].evaluations
+    assert evaluations[1e-12] > evaluations[1e-3], evaluations
+    with pytest.raises(ValueError, match="lbfgs_ftol"):
+        RefineConfig(lbfgs_ftol=0.0)
+
+
 def test_pyramid_widens_the_basin(rng):
     """From 3 degrees / 10 cm off, the coarse-to-fine run gets back to the truth; the single
     full-resolution level (the reference's procedure) does not move on this finely textured scene

@@ -36,6 +36,10 @@ class RefineConfig:
         Stop when an outer iteration moves the pose less than both.
     max_inner : int
         Iterations (L-BFGS) or, times 40, evaluations (Nelder-Mead) per outer iteration.
+    lbfgs_ftol : float
+        L-BFGS-B's stop on the relative reduction of the cost between iterations (1e-7). 1e-9
+        took twice the evaluations on synthetic pairs for the same result, but let the flat
+        costs of real frames go on improving (docs/BENCHMARKS.md, real data).
     nelder_mead_init_step : float
         Initial simplex size in the tangent space (reference: 1e-3).
     pyramid_levels : int
@@ -72,6 +76,7 @@ class RefineConfig:
     converge_translation: float = 1e-3
     converge_rotation_deg: float = 0.01
     max_inner: int = 50
+    lbfgs_ftol: float = 1e-7
     nelder_mead_init_step: float = 1e-3
     pyramid_levels: int = 2
     min_pyramid_size: int = 240
@@ -93,6 +98,8 @@ class RefineConfig:
         ):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} must be >= 0")
+        if not self.lbfgs_ftol > 0:
+            raise ValueError(f"lbfgs_ftol must be > 0, got {self.lbfgs_ftol}")
         if self.max_outer < 1 or self.max_inner < 1:
             raise ValueError("max_outer and max_inner must be >= 1")
         if not 0 <= self.pyramid_levels <= 5:

@@ -369,6 +369,7 @@ def _outer_iteration(pairs, T, config: RefineConfig, level: int, max_rot: float)
             max_translation=config.max_translation,
             max_rotation=max_rot,
             max_iterations=config.max_inner,
+            ftol=config.lbfgs_ftol,
         )
     else:
         inner = minimize_nelder_mead(
