@@ -7,9 +7,11 @@ LiDAR frame, rotation angle).
 
 1. Accuracy: for each combination LiDAR x camera (spinning64 / livox x plumb_bob / omnidir, plus
    spinning64 x fisheye), ``--seeds`` rigs; each run starts 5-10 cm and 1-2 degrees off in random
-   directions and uses one pair, then the same rig's three pairs. Median and max errors.
+   directions and uses one pair, then the same rig's three pairs. Median and max errors; the
+   optimiser is ``--optimizer`` (default: RefineConfig's).
 2. Basin: on one pair of spinning64 x omnidir (``--basin-combo``), ``--trials`` random starts
-   per initial error (1 deg / 5 cm, 2 / 10, 3 / 20, 5 / 30) for each optimiser; success = final
+   per initial error (1 deg / 5 cm, 2 / 10, 3 / 20, 5 / 30) for each optimiser (hybrid, lbfgs,
+   nelder_mead; ``--nm-step`` sets Nelder-Mead's initial simplex); success = final
    error < 2 cm and < 0.2 degrees.
 
 Timings are process CPU seconds (serial kernels) beside wall seconds; the load average is
@@ -18,6 +20,7 @@ printed. The last line of the output is one JSON object.
 Usage::
 
     python benchmarks/bench_registration.py            # about 15-20 CPU minutes
+    python benchmarks/bench_registration.py --seeds 3 --max-points 200000 --trials 5   # ~6 min
     python benchmarks/bench_registration.py --quick    # smoke run, about a minute
 """
 
@@ -34,6 +37,7 @@ import time
 import numpy as np
 
 from nbcalib.preprocess.intensity import equalize_image, equalize_point_intensities
+from nbcalib.registration.config import OPTIMIZERS
 from nbcalib.registration.refine import RefineConfig, RegistrationPair, refine
 from nbcalib.synthetic.rig import RigConfig, generate_sequence
 from nbcalib.transforms import invert_T, pose_error, so3_exp
@@ -123,6 +127,18 @@ def main(argv=None) -> int:
         action="store_true",
         help="one histogram per pair (orientation_classes=False), for side-by-side runs",
     )
+    parser.add_argument(
+        "--optimizer",
+        choices=OPTIMIZERS,
+        default=RefineConfig().optimizer,
+        help="optimiser of the accuracy table (the basin runs both)",
+    )
+    parser.add_argument(
+        "--nm-step",
+        type=float,
+        default=RefineConfig().nelder_mead_init_step,
+        help="RefineConfig.nelder_mead_init_step (accuracy table and basin)",
+    )
     args = parser.parse_args(argv)
     combos, seeds, trials, max_points = COMBOS, range(args.seeds), args.trials, args.max_points
     if args.combos:
@@ -137,7 +153,11 @@ def main(argv=None) -> int:
     print(f"load average at start: {' '.join(load)}", file=sys.stderr)
     classes = not args.plain_nid
     config = RefineConfig(
-        parallel=False, pyramid_levels=args.pyramid_levels, orientation_classes=classes
+        optimizer=args.optimizer,
+        parallel=False,
+        pyramid_levels=args.pyramid_levels,
+        orientation_classes=classes,
+        nelder_mead_init_step=args.nm_step,
     )
     out = {"load_start": load, "max_points": max_points, "config": vars(args), "accuracy": {}}
 
@@ -183,12 +203,13 @@ def main(argv=None) -> int:
         print("| optimiser | initial error | success | median cm | median deg | CPU s |")
         print("|---|---|---|---|---|---|")
         out["basin"] = {}
-        for optimizer in ("lbfgs", "nelder_mead"):
+        for optimizer in OPTIMIZERS:
             cfg = RefineConfig(
                 optimizer=optimizer,
                 parallel=False,
                 pyramid_levels=args.pyramid_levels,
                 orientation_classes=classes,
+                nelder_mead_init_step=args.nm_step,
             )
             for deg, metres in BASIN_LEVELS[: 1 if args.quick else None]:
                 rng = np.random.default_rng([int(deg * 10), 17])

@@ -38,6 +38,7 @@ from nbcalib.preprocess import lidar_image
 from nbcalib.preprocess.intensity import equalize_image, equalize_point_intensities
 from nbcalib.registration import nid as nid_module
 from nbcalib.registration import refine as refine_module
+from nbcalib.registration.config import OPTIMIZERS
 from nbcalib.registration.refine import RefineConfig, RegistrationPair, refine
 from nbcalib.synthetic import RigConfig, generate_sequence
 from nbcalib.transforms import invert_T, pose_error, se3_exp
@@ -159,7 +160,7 @@ def main():
     ap.add_argument("--points", type=int, default=1_000_000)
     ap.add_argument("--width", type=int, default=1920)
     ap.add_argument("--height", type=int, default=1080)
-    ap.add_argument("--optimizer", default="lbfgs", choices=["lbfgs", "nelder_mead"])
+    ap.add_argument("--optimizer", default=RefineConfig().optimizer, choices=OPTIMIZERS)
     ap.add_argument("--init-deg", type=float, default=1.5)
     ap.add_argument("--init-cm", type=float, default=7.0)
     ap.add_argument("--seed", type=int, default=3)

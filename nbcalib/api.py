@@ -218,7 +218,7 @@ def calibrate(
     ransac_iterations: int = 8192,
     ransac_threshold: float = 5.0,
     seed: int = 0,
-    optimizer: str = "lbfgs",
+    optimizer: str = "hybrid",
     bins: int = 16,
     max_outer: int = 10,
     log: Callable[[str], None] | None = None,
@@ -254,7 +254,8 @@ def calibrate(
         Equalise LiDAR intensities and the camera image (paper III-C).
     ransac_iterations, ransac_threshold, seed : optional
         Initial guess: RANSAC hypotheses, inlier threshold (pixels), seed.
-    optimizer : {"lbfgs", "nelder_mead"}, optional
+    optimizer : {"hybrid", "lbfgs", "nelder_mead"}, optional
+        Fine registration's optimiser (:class:`~nbcalib.registration.config.RefineConfig`).
     bins : int, optional
         NID histogram bins.
     max_outer : int, optional

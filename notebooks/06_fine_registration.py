@@ -125,8 +125,11 @@ fig.tight_layout()
 # ## Refine from a perturbed start
 #
 # Start 1.5 degrees and 7 cm off and run `refine`: each outer iteration removes hidden points
-# from the current pose, then L-BFGS minimises the B-spline-smoothed NID (with its exact
-# gradient) inside a trust box of 0.2 m / 2 degrees. It stops when the pose stops moving.
+# from the current pose, then minimises the NID inside a trust box of 0.2 m / 2 degrees, and
+# the loop stops when the pose stops moving. By default (`optimizer="hybrid"`) it runs twice:
+# first Nelder-Mead on the hard-binned NID (the paper's), coarse to fine over an image pyramid,
+# which finds the right basin from a few degrees off; then L-BFGS on the B-spline-smoothed NID,
+# with its exact gradient, at full resolution. `optimizer="lbfgs"` or `"nelder_mead"` runs one.
 
 # %%
 rng = np.random.default_rng(1)

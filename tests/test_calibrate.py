@@ -144,6 +144,7 @@ def test_lbfgs_ftol_reaches_the_optimiser(rng):
     evaluations = {}
     for ftol in (1e-3, 1e-12):
         config = RefineConfig(
+            optimizer="lbfgs",
             pyramid_levels=0,
             hidden_point_removal=False,
             parallel=False,
@@ -168,13 +169,38 @@ def test_pyramid_widens_the_basin(rng):
     ends = {}
     for levels in (0, 3):
         config = RefineConfig(
-            pyramid_levels=levels, min_pyramid_size=16, hidden_point_removal=False, parallel=False
+            optimizer="lbfgs",
+            pyramid_levels=levels,
+            min_pyramid_size=16,
+            hidden_point_removal=False,
+            parallel=False,
         )
         result = refine([pair], T_start, config)
         ends[levels] = pose_error(invert_T(result.T_camera_lidar), np.eye(4))
         assert result.history[0].level == levels
     assert ends[3][0] < 0.005 and ends[3][1] < 0.05, ends
     assert ends[0][0] > 0.02 or ends[0][1] > 0.2, ends
+
+
+def test_hybrid_runs_nelder_mead_then_lbfgs_at_full_resolution(rng):
+    cam = example_camera("plumb_bob", 320, 240)
+    image, points, intensities = textured_scene(cam, rng, n=20000, blur=0.8)
+    pair = RegistrationPair(cam, image, points, intensities)
+    T_start = se3_exp(np.array([0.03, -0.02, 0.01, 0.012, -0.015, 0.006]))  # 3.6 cm, 1.3 deg
+    config = RefineConfig(
+        optimizer="hybrid", min_pyramid_size=16, hidden_point_removal=False, parallel=False
+    )
+    result = refine([pair], T_start, config)
+    stages = [h.optimizer for h in result.history]
+    first_lbfgs = stages.index("lbfgs")
+    assert set(stages[:first_lbfgs]) == {"nelder_mead"} and set(stages[first_lbfgs:]) == {"lbfgs"}
+    assert result.history[0].level == 2
+    assert all(h.level == 0 for h in result.history[first_lbfgs:])
+    assert result.converged
+    dt, dr = pose_error(invert_T(result.T_camera_lidar), np.eye(4))
+    assert dt < 0.005 and dr < 0.05, (dt, dr)
+    with pytest.raises(ValueError, match="optimizer"):
+        RefineConfig(optimizer="bfgs")
 
 
 def test_pyramid_levels_keep_a_minimum_image_size():
@@ -201,7 +227,11 @@ def test_refine_stops_when_it_wanders_from_the_initial_guess(rng):
     image, points, intensities = textured_scene(cam, rng, n=5000, blur=0.8)
     T_start = se3_exp(np.array([0.3, 0.0, 0.0, 0.0, 0.0, 0.0]))  # 30 cm off
     config = RefineConfig(
-        pyramid_levels=0, hidden_point_removal=False, parallel=False, max_total_translation=0.05
+        optimizer="lbfgs",
+        pyramid_levels=0,
+        hidden_point_removal=False,
+        parallel=False,
+        max_total_translation=0.05,
     )
     result = refine([RegistrationPair(cam, image, points, intensities)], T_start, config)
     assert not result.converged

@@ -20,7 +20,8 @@ examples:
   nbcalib calibrate work/
   nbcalib calibrate work/ --init 0.1,-0.05,0.02,0.5,-0.5,0.5,0.5
   nbcalib calibrate work/ --init=-0.1,0.05,0.02,0.5,-0.5,0.5,0.5
-  nbcalib calibrate work/ --optimizer nelder_mead          # the paper's optimiser
+  nbcalib calibrate work/ --optimizer nelder_mead          # the paper's optimiser alone
+  nbcalib calibrate work/ --optimizer lbfgs                # L-BFGS alone, over the pyramid
   nbcalib calibrate work/ --pairs 1 --window 1              # first pair only, 3x3 visibility test
   nbcalib calibrate work/ --pyramid-levels 0                # full resolution only (reference)
 
@@ -31,7 +32,7 @@ write --init=-0.1,... when the first value is negative.
 
 def add_parser(subparsers, formatter_class) -> argparse.ArgumentParser:
     """Register ``calibrate``."""
-    from nbcalib.registration.config import RefineConfig
+    from nbcalib.registration.config import OPTIMIZERS, RefineConfig
 
     d = RefineConfig()
     p = subparsers.add_parser(
@@ -43,7 +44,12 @@ def add_parser(subparsers, formatter_class) -> argparse.ArgumentParser:
     )
     p.add_argument("workdir", metavar="WORKDIR", help="work directory made by nbcalib preprocess")
     p.add_argument("--init", metavar="X,Y,Z,QX,QY,QZ,QW", help="start from this T_lidar_camera")
-    p.add_argument("--optimizer", choices=("lbfgs", "nelder_mead"), default=d.optimizer)
+    p.add_argument(
+        "--optimizer",
+        choices=OPTIMIZERS,
+        default=d.optimizer,
+        help="hybrid: Nelder-Mead over the pyramid, then L-BFGS (default); or either alone",
+    )
     p.add_argument("--bins", type=int, default=d.bins, help="NID histogram bins")
     p.add_argument("--max-outer", type=int, default=d.max_outer, help="outer iterations at most")
     p.add_argument("--depth-margin", type=float, default=d.depth_margin, help="visibility, metres")

@@ -6,7 +6,9 @@ Each outer iteration
    at the camera's resolution; points more than ``depth_margin`` behind the nearest point in
    their pixel, or ``window`` pixels around it, are hidden);
 2. minimises the NID summed over the pairs in a trust box around the current pose (L-BFGS on the
-   B-spline NID with its exact gradient, or Nelder-Mead on the hard-binned NID as the paper);
+   B-spline NID with its exact gradient, or Nelder-Mead on the hard-binned NID as the paper;
+   the default ``optimizer="hybrid"`` runs the whole loop with Nelder-Mead, then again at full
+   resolution with L-BFGS from its result);
    by default each pair's NID is conditioned on surface orientation (one histogram per class
    of normal direction, :mod:`nbcalib.registration.orientation`), which removes a shading bias
    of the plain NID;
@@ -34,7 +36,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -141,6 +143,7 @@ class OuterIteration:
     seconds: float
     message: str
     level: int = 0
+    optimizer: str = "lbfgs"
 
 
 @dataclass
@@ -247,7 +250,8 @@ def build_cost(
     and the pair's term is the point-weighted mean of its class NIDs
     (:mod:`nbcalib.registration.orientation`); the pairs' terms are summed.
     """
-    form = "smooth" if config.optimizer == "lbfgs" else "hard"
+    # the hybrid ends with L-BFGS: its result is judged by the smooth form
+    form = "hard" if config.optimizer == "nelder_mead" else "smooth"
     costs, weights, counts = [], [], []
     for pair in pairs:
         keep = visible_subset(pair, T_camera_lidar, config)
@@ -312,9 +316,28 @@ def refine(
         raise ValueError("refine needs at least one LiDAR-camera pair")
     T = validate_T(np.asarray(T_camera_lidar_init, dtype=np.float64), "T_camera_lidar_init")
     result = RefineResult(T.copy())
+    if config.optimizer == "hybrid":
+        # Nelder-Mead on the hard NID over the pyramid finds the basin; L-BFGS on the smooth
+        # NID at full resolution then polishes (docs/BENCHMARKS.md, "hybrid optimiser")
+        stages = [
+            replace(config, optimizer="nelder_mead"),
+            replace(config, optimizer="lbfgs", pyramid_levels=0),
+        ]
+    else:
+        stages = [config]
+    for stage in stages:
+        if not _run_levels(pairs, T, stage, result, progress):
+            break
+    return result
+
+
+def _run_levels(pairs, T_init, config: RefineConfig, result: RefineResult, progress) -> bool:
+    """Outer iterations from ``result.T_camera_lidar``, coarse to fine; False when stopped.
+
+    ``T_init`` is the caller's initial guess, from which the total motion is bounded.
+    """
+    T = result.T_camera_lidar.copy()
     max_rot = math.radians(config.max_rotation_deg)
-    outer = 0
-    T_init = T.copy()
     max_total_rot = config.max_total_rotation_deg
     for level in range(_usable_levels(pairs, config), -1, -1):
         # coarse levels only bring the pose into the finest level's basin: looser stop
@@ -322,12 +345,12 @@ def refine(
         for _ in range(config.max_outer):
             step, T_new = _outer_iteration(pairs, T, config, level, max_rot)
             dt, dr = step.translation_change, step.rotation_change_deg
+            outer = len(result.history)
             result.history.append(step)
             T = T_new
             result.T_camera_lidar = T.copy()
             if progress is not None:
                 progress(outer, step)
-            outer += 1
             moved_t, moved_r = pose_error(invert_T(T), invert_T(T_init))
             if moved_t > config.max_total_translation or moved_r > max_total_rot:
                 result.converged = False
@@ -335,14 +358,16 @@ def refine(
                     f"moved {moved_t:.2f} m / {moved_r:.1f} deg from the initial guess, beyond "
                     f"{config.max_total_translation} m / {max_total_rot} deg: stopped"
                 )
-                return result
+                return False
             if (
                 dt < scale * config.converge_translation
                 and dr < scale * config.converge_rotation_deg
             ):
                 result.converged = level == 0
                 break
-    return result
+        else:
+            result.converged = False
+    return True
 
 
 def _usable_levels(pairs: Sequence[RegistrationPair], config: RefineConfig) -> int:
@@ -395,5 +420,6 @@ def _outer_iteration(pairs, T, config: RefineConfig, level: int, max_rot: float)
         seconds=time.perf_counter() - t0,
         message=inner.message,
         level=level,
+        optimizer=config.optimizer,
     )
     return step, T_new

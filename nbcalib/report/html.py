@@ -215,10 +215,11 @@ def _initial_guess(calib: CalibFile, info: dict) -> tuple[np.ndarray | None, str
 
 
 def _refine_config(info: dict):
+    from nbcalib.registration.config import OPTIMIZERS
     from nbcalib.registration.refine import RefineConfig
 
     kwargs = {}
-    if info.get("optimizer") in ("lbfgs", "nelder_mead"):
+    if info.get("optimizer") in OPTIMIZERS:
         kwargs["optimizer"] = info["optimizer"]
     bins = info.get("bins")
     if isinstance(bins, int) and not isinstance(bins, bool) and 2 <= bins <= 256:
