@@ -104,11 +104,12 @@ class AssessConfig:
     """
 
     confidence: float = 0.95
-    # tuned by benchmarks/bench_report_coverage.py on 2026-12-01, demo-sized pairs (640 x 480,
-    # 0.02 m voxel, 1 and 3 pairs), tuning half; the first tuning (2026-11-23, 400 x 300 pairs
-    # with <= 20 000 points) gave 2.06, with which good three-pair results were called
-    # "pairs disagree"
-    scale: float = 6.78
+    # tuned by benchmarks/bench_report_coverage.py on demo-sized pairs (640 x 480, 0.02 m voxel,
+    # 1 and 3 pairs), tuning half: 8.15 with the hybrid optimiser (RefineConfig default since
+    # 2026-12-01 ~21:00 UTC), 6.78 with L-BFGS alone before; the first tuning (2026-11-23,
+    # 400 x 300 pairs with <= 20 000 points) gave 2.06, with which good three-pair results
+    # were called "pairs disagree"
+    scale: float = 8.15
     curve_samples: int = 21
     curve_translation: float = 0.10
     curve_rotation_deg: float = 2.0
