@@ -56,26 +56,41 @@ _NEWTON_ITERS = 30
 
 
 @jit_inline
-def _distort_poly(params, x, y):
-    """Brown-Conrady / rational distortion of a normalised point; returns (xd, yd, ok)."""
+def _distort_poly_terms(params, x, y, rational):
+    """``(r2, den, xd, yd)`` of the Brown-Conrady / rational distortion, without validity tests.
+
+    The one place its arithmetic is written: :func:`_distort_poly` tests ``r2`` and ``den``
+    after it, and the branch-free loops of :func:`nearest_pixels` fold the same tests into one
+    boolean, so both give identical pixels. ``rational`` False (k4 = k5 = k6 = 0, a constant
+    at the call site) skips the denominator: ``den = 1`` and ``radial = num``, which is what
+    ``num / 1.0`` gives for every finite ``r2``.
+    """
     k1 = params[P_DIST + 0]
     k2 = params[P_DIST + 1]
     p1 = params[P_DIST + 2]
     p2 = params[P_DIST + 3]
     k3 = params[P_DIST + 4]
-    k4 = params[P_DIST + 5]
-    k5 = params[P_DIST + 6]
-    k6 = params[P_DIST + 7]
     r2 = x * x + y * y
-    if not r2 <= params[P_LIMIT]:
-        return math.nan, math.nan, False
     num = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-    den = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6))
-    if den <= 0.0:
-        return math.nan, math.nan, False
-    radial = num / den
+    if rational:
+        den = 1.0 + r2 * (params[P_DIST + 5] + r2 * (params[P_DIST + 6] + r2 * params[P_DIST + 7]))
+        radial = num / den
+    else:
+        den = 1.0
+        radial = num
     xd = x * radial + 2.0 * p1 * x * y + p2 * (r2 + 2.0 * x * x)
     yd = y * radial + p1 * (r2 + 2.0 * y * y) + 2.0 * p2 * x * y
+    return r2, den, xd, yd
+
+
+@jit_inline
+def _distort_poly(params, x, y):
+    """Brown-Conrady / rational distortion of a normalised point; returns (xd, yd, ok)."""
+    r2, den, xd, yd = _distort_poly_terms(params, x, y, True)
+    if not r2 <= params[P_LIMIT]:
+        return math.nan, math.nan, False
+    if den <= 0.0:
+        return math.nan, math.nan, False
     return xd, yd, True
 
 
@@ -656,23 +671,14 @@ def _nearest_pixels_poly_loop(params, omni, rational, T, x, y, z, width, height,
     """Pinhole family or omnidir (``omni``); ``rational`` False when k4 = k5 = k6 = 0.
 
     Both flags are constants at each call site below, so numba's inlining leaves LLVM one
-    straight loop per case. Without the rational denominator, ``radial = num`` is what
-    ``num / 1.0`` gives, and the ``den > 0`` test it drops only ever failed for non-finite
-    ``r2``, which the pixel range test rejects as well.
+    straight loop per case. Without the rational denominator (``den = 1``) a non-finite ``r2``
+    that ``den > 0`` would have rejected is rejected by the pixel range test instead.
     """
     fx = params[P_FX]
     fy = params[P_FY]
     cx = params[P_CX]
     cy = params[P_CY]
     xi = params[P_XI]
-    k1 = params[P_DIST + 0]
-    k2 = params[P_DIST + 1]
-    p1 = params[P_DIST + 2]
-    p2 = params[P_DIST + 3]
-    k3 = params[P_DIST + 4]
-    k4 = params[P_DIST + 5]
-    k5 = params[P_DIST + 6]
-    k6 = params[P_DIST + 7]
     limit = params[P_LIMIT]
     zmin = -min(xi, 1.0 / xi) if xi > 0.0 else 0.0
     r00, r01, r02, t0 = T[0, 0], T[0, 1], T[0, 2], T[0, 3]
@@ -699,20 +705,10 @@ def _nearest_pixels_poly_loop(params, omni, rational, T, x, y, z, width, height,
             front = Z > 0.0
             xn = X * iz
             yn = Y * iz
-        # _distort_poly
-        r2 = xn * xn + yn * yn
-        num = 1.0 + r2 * (k1 + r2 * (k2 + r2 * k3))
-        if rational:
-            den = 1.0 + r2 * (k4 + r2 * (k5 + r2 * k6))
-            radial = num / den
-            front = front & (den > 0.0)
-        else:
-            radial = num
-        xd = xn * radial + 2.0 * p1 * xn * yn + p2 * (r2 + 2.0 * xn * xn)
-        yd = yn * radial + p1 * (r2 + 2.0 * yn * yn) + 2.0 * p2 * xn * yn
+        r2, den, xd, yd = _distort_poly_terms(params, xn, yn, rational)  # as _distort_poly
         fu = (fx * xd + cx) + 0.5
         fv = (fy * yd + cy) + 0.5
-        ok = finite & front & (r2 <= limit)
+        ok = finite & front & (r2 <= limit) & (den > 0.0)
         ok = ok & (fu >= 0.0) & (fu < w) & (fv >= 0.0) & (fv < h)
         out[i] = _pixel_index(fu, fv, ok, width, invalid)
 
