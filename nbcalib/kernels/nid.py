@@ -89,16 +89,16 @@ def _joint_hist_hard_impl(model_id, params, T, xyz, point_bins, image_ext, width
                 sentinel,
                 pix,
             )
-            a = point_bins[s:e]
+            row = point_bins[s:e]  # each point's histogram row (its LiDAR bin)
             m = e - s
             m4 = m - m % 4
             for j in range(0, m4, 4):
-                counts[a[j] * cols + image_ext[pix[j]]] += 1
-                counts[stride + a[j + 1] * cols + image_ext[pix[j + 1]]] += 1
-                counts[2 * stride + a[j + 2] * cols + image_ext[pix[j + 2]]] += 1
-                counts[3 * stride + a[j + 3] * cols + image_ext[pix[j + 3]]] += 1
+                counts[row[j] * cols + image_ext[pix[j]]] += 1
+                counts[stride + row[j + 1] * cols + image_ext[pix[j + 1]]] += 1
+                counts[2 * stride + row[j + 2] * cols + image_ext[pix[j + 2]]] += 1
+                counts[3 * stride + row[j + 3] * cols + image_ext[pix[j + 3]]] += 1
             for j in range(m4, m):
-                counts[a[j] * cols + image_ext[pix[j]]] += 1
+                counts[row[j] * cols + image_ext[pix[j]]] += 1
         for k in range(stride):
             parts[c, k] = counts[k] + counts[stride + k] + counts[2 * stride + k]
             parts[c, k] += counts[3 * stride + k]
