@@ -53,9 +53,9 @@ from nbcalib.io.calib_json import read_ground_truth
 from nbcalib.io.camera_file import load_camera
 from nbcalib.metrics import pose_errors
 from nbcalib.preprocess.pipeline import PreprocessConfig, gather_files, preprocess
-from nbcalib.preprocess.workdir import WorkDir
 from nbcalib.registration.refine import RefineConfig, RegistrationPair, build_cost, refine
 from nbcalib.transforms import interpolate_pose, invert_T, make_T, se3_exp, so3_exp
+from nbcalib.workdir import WorkDir
 
 #: ../shared/data/real relative to the project root (as tests/conftest.py)
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"

@@ -348,7 +348,7 @@ class _work_directory:
 
 
 def _load_products(path: Path) -> list[PairProducts]:
-    from nbcalib.preprocess.workdir import WorkDir
+    from nbcalib.workdir import WorkDir
 
     work = WorkDir(path)
     products = []
@@ -369,7 +369,7 @@ def _initial_guess(path, camera, products, matcher, model_dir, iterations, thres
     )
     from nbcalib.initial_guess.estimate import MIN_CORRESPONDENCES, estimate_initial_guess
     from nbcalib.matching.match import camera_scale_for, match_images, resolve_matcher
-    from nbcalib.preprocess.workdir import WorkDir, get_virtual_camera
+    from nbcalib.workdir import WorkDir, get_virtual_camera
 
     name = resolve_matcher(matcher, model_dir)
     virtual = get_virtual_camera(WorkDir(path).read_calib())
@@ -439,7 +439,7 @@ def _has_report() -> bool:
 
 def _write_results(path: Path, result: CalibrationResult) -> None:
     from nbcalib.io.calib_json import AUTO_STAGE, FINAL_STAGE
-    from nbcalib.preprocess.workdir import WorkDir
+    from nbcalib.workdir import WorkDir
 
     work = WorkDir(path)
     calib = work.read_calib()

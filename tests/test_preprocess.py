@@ -10,7 +10,7 @@ import pytest
 from nbcalib.cli import main
 from nbcalib.io.image import write_png
 from nbcalib.io.pointcloud import write_pcd
-from nbcalib.preprocess.workdir import WorkDir
+from nbcalib.workdir import WorkDir
 
 
 def room_scan(rng, n=20000):

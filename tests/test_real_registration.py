@@ -22,9 +22,9 @@ from nbcalib.io.calib_json import read_ground_truth
 from nbcalib.io.camera_file import load_camera
 from nbcalib.metrics import pose_errors
 from nbcalib.preprocess.pipeline import PreprocessConfig, gather_files, preprocess
-from nbcalib.preprocess.workdir import WorkDir
 from nbcalib.registration.refine import RefineConfig, RegistrationPair, refine
 from nbcalib.transforms import invert_T, make_T, so3_exp
+from nbcalib.workdir import WorkDir
 
 
 def _perturbed(T_camera_lidar, seed, *, angle_deg=1.0, distance=0.05):

@@ -18,10 +18,10 @@ from nbcalib.preprocess.lidar_image import (
     make_virtual_camera,
     render_lidar_image,
 )
-from nbcalib.preprocess.workdir import WorkDir, make_calib
 from nbcalib.registration.refine import RegistrationPair
 from nbcalib.report import AssessConfig, assess, rejudge
 from nbcalib.transforms import se3_exp, se3_log
+from nbcalib.workdir import WorkDir, make_calib
 from tests.test_nid import textured_scene
 from tests.tolerances import TOL
 

@@ -12,7 +12,7 @@ from nbcalib.camera import create_camera
 from nbcalib.errors import InputError
 from nbcalib.preprocess.intensity import equalize_image, equalize_point_intensities
 from nbcalib.preprocess.lidar_image import make_virtual_camera, render_lidar_image
-from nbcalib.preprocess.workdir import (
+from nbcalib.workdir import (
     PLAIN_FILES_NAME,
     WorkDir,
     decode_index_map,

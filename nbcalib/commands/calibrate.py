@@ -86,9 +86,9 @@ def run(args) -> int:
 
     from nbcalib.errors import InputError
     from nbcalib.io.calib_json import FINAL_STAGE
-    from nbcalib.preprocess.workdir import WorkDir
     from nbcalib.registration.refine import RefineConfig, RegistrationPair, refine
     from nbcalib.transforms import invert_T, pose_error, pose_to_xyz_quat
+    from nbcalib.workdir import WorkDir
 
     work = WorkDir(args.workdir)
     if not work.calib_path.is_file():

@@ -2,7 +2,8 @@
 
 Writes the chosen ``calib.json`` result as tf2 ``static_transform_publisher`` arguments (ROS 1
 and ROS 2) with a ROS 2 launch file, a URDF fixed joint, and an OpenCV FileStorage YAML with
-the camera and the extrinsic (:mod:`nbcalib.export`). Each file states its frame convention.
+the camera and the extrinsic (:mod:`nbcalib.io.extrinsic_formats`). Each file states its frame
+convention.
 """
 
 from __future__ import annotations
@@ -67,7 +68,7 @@ def add_parser(subparsers, formatter_class=argparse.HelpFormatter) -> argparse.A
 
 def run(args: argparse.Namespace) -> int:
     """Write the export files and list them; returns 0."""
-    from nbcalib.export import FORMATS, export_result, load_result, tf2_arguments
+    from nbcalib.io.extrinsic_formats import FORMATS, export_result, load_result, tf2_arguments
     from nbcalib.transforms import pose_from_xyz_quat
 
     formats = FORMATS if args.fmt == "all" else (args.fmt,)

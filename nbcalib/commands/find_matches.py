@@ -47,7 +47,7 @@ examples:
 
 def add_parser(subparsers, formatter_class=argparse.HelpFormatter) -> argparse.ArgumentParser:
     """Register ``find-matches`` on the ``nbcalib`` subcommand parser."""
-    from nbcalib.matching.preprocess import NORMALIZATIONS
+    from nbcalib.matching.normalize import NORMALIZATIONS
 
     matchers = ("auto", "xfeat-lighterglue", "aliked-lightglue", "disk-lightglue", "sift")
     parser = subparsers.add_parser(
@@ -135,7 +135,7 @@ def run(args: argparse.Namespace) -> int:
     from nbcalib.matching import match as m
     from nbcalib.matching.draw import draw_matches
     from nbcalib.matching.matches import write_matches_json
-    from nbcalib.preprocess.workdir import WorkDir
+    from nbcalib.workdir import WorkDir
 
     log = logging.getLogger("nbcalib.find_matches")
     workdir = WorkDir(args.workdir)
@@ -214,7 +214,7 @@ def _run_views(args, workdir, names, matcher, options, log) -> bool:
     from nbcalib.io.image import write_png
     from nbcalib.matching.draw import draw_matches
     from nbcalib.matching.matches import write_matches_json
-    from nbcalib.preprocess.workdir import get_virtual_camera
+    from nbcalib.workdir import get_virtual_camera
 
     calib = workdir.read_calib()
     virtual = get_virtual_camera(calib)
@@ -275,7 +275,7 @@ def _camera_scale(workdir, name: str, log) -> float | None:
     """Pixels per degree of the LiDAR image over the camera image's, from ``calib.json``."""
     from nbcalib.io.calib_json import read_image_size
     from nbcalib.matching.match import camera_scale_for
-    from nbcalib.preprocess.workdir import get_virtual_camera
+    from nbcalib.workdir import get_virtual_camera
 
     calib = workdir.read_calib()
     virtual = get_virtual_camera(calib)

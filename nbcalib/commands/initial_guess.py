@@ -178,7 +178,7 @@ def run(args: argparse.Namespace) -> int:
 
     from nbcalib.initial_guess.estimate import MIN_CORRESPONDENCES, estimate_initial_guess
     from nbcalib.io.calib_json import AUTO_STAGE, MANUAL_STAGE, write_calib_json
-    from nbcalib.preprocess.workdir import WorkDir
+    from nbcalib.workdir import WorkDir
 
     wd = WorkDir(args.workdir)
     if not wd.path.is_dir():

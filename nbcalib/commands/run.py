@@ -222,7 +222,7 @@ class Pipeline:
     """
 
     def __init__(self, workdir, options: dict, *, quiet: bool = False):
-        from nbcalib.preprocess.workdir import WorkDir
+        from nbcalib.workdir import WorkDir
 
         self.work = WorkDir(workdir)
         self.options = dict(options)

@@ -152,7 +152,7 @@ def run(args) -> int:
 
     from nbcalib.errors import InputError
     from nbcalib.synthetic import RigConfig
-    from nbcalib.synthetic.export import export_dataset
+    from nbcalib.synthetic.writer import export_dataset
 
     out = Path(args.out)
     if out.exists() and not out.is_dir():

@@ -4,7 +4,7 @@
   the LiDAR index map, pooled over pairs;
 - :mod:`~nbcalib.initial_guess.ransac`: rotation-only RANSAC (Algorithm 1), numba, parallel and
   deterministic for a seed;
-- :mod:`~nbcalib.initial_guess.refine`: Levenberg-Marquardt with a Cauchy kernel on the
+- :mod:`~nbcalib.initial_guess.lm`: Levenberg-Marquardt with a Cauchy kernel on the
   reprojection error (Eq. 1), analytic Jacobians;
 - :mod:`~nbcalib.initial_guess.multiview`: matches against camera-shaped LiDAR views at several
   headings (or around a prior), the view with the best RANSAC support kept;
@@ -41,6 +41,13 @@ from nbcalib.initial_guess.estimate import (
     translation_from_bearings,
     translation_ransac,
 )
+from nbcalib.initial_guess.lm import (
+    LMResult,
+    cauchy_loss,
+    refine_pose_lm,
+    reprojection_errors,
+    reprojection_residuals,
+)
 from nbcalib.initial_guess.manual import (
     ManualCorrespondence,
     read_manual_correspondences,
@@ -53,22 +60,15 @@ from nbcalib.initial_guess.ransac import (
     estimate_rotation_ransac,
     usable_correspondences,
 )
-from nbcalib.initial_guess.refine import (
-    RefineResult,
-    cauchy_loss,
-    refine_pose_lm,
-    reprojection_errors,
-    reprojection_residuals,
-)
 from nbcalib.initial_guess.synthetic import SyntheticCorrespondences, synthetic_correspondences
 
 __all__ = [
     "MIN_CORRESPONDENCES",
     "Correspondences",
     "InitialGuess",
+    "LMResult",
     "ManualCorrespondence",
     "MultiViewMatches",
-    "RefineResult",
     "RotationRansacResult",
     "SyntheticCorrespondences",
     "ViewMatches",

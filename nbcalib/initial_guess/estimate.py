@@ -2,7 +2,7 @@
 
 Paper section III-D: :func:`~nbcalib.initial_guess.ransac.estimate_rotation_ransac` finds the
 rotation supported by the most correspondences (translation ignored), and
-:func:`~nbcalib.initial_guess.refine.refine_pose_lm` minimises the Cauchy-robustified
+:func:`~nbcalib.initial_guess.lm.refine_pose_lm` minimises the Cauchy-robustified
 reprojection error of all correspondences over the full pose, starting from that rotation.
 
 nbcalib adds four things to the reference toolbox's procedure (measured in docs/BENCHMARKS.md;
@@ -51,12 +51,12 @@ import numpy as np
 
 from nbcalib.camera import CameraModel
 from nbcalib.errors import InputError
+from nbcalib.initial_guess.lm import LMResult, refine_pose_lm, reprojection_errors
 from nbcalib.initial_guess.ransac import (
     RotationRansacResult,
     estimate_rotation_ransac,
     usable_correspondences,
 )
-from nbcalib.initial_guess.refine import RefineResult, refine_pose_lm, reprojection_errors
 from nbcalib.transforms import make_T
 
 __all__ = [
@@ -111,7 +111,7 @@ class InitialGuess:
         Inliers needed for ``success``.
     ransac : RotationRansacResult
         The rotation-only RANSAC step.
-    refinement : RefineResult
+    refinement : LMResult
         The LM step (paper Eq. 1 over all correspondences, before the polish).
     T_camera_lidar_start : ndarray of shape (4, 4), float64
         Where LM started (for the winning candidate).
@@ -135,7 +135,7 @@ class InitialGuess:
     threshold: float
     min_inliers: int
     ransac: RotationRansacResult
-    refinement: RefineResult
+    refinement: LMResult
     T_camera_lidar_start: np.ndarray
     candidate: int
     support: int = 0

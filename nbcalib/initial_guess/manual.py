@@ -197,7 +197,7 @@ def resolve_manual_correspondences(
     ----------
     entries : sequence of ManualCorrespondence
         The picks.
-    workdir : nbcalib.preprocess.workdir.WorkDir or path
+    workdir : nbcalib.workdir.WorkDir or path
         The work directory (its index maps and clouds lift ``lidar_uv``).
     search_radius : float, optional
         Pixels around an empty LiDAR-image pixel searched for a filled one.
@@ -214,7 +214,7 @@ def resolve_manual_correspondences(
     InputError
         An unknown or missing ``name``, or a LiDAR pixel that shows no point.
     """
-    from nbcalib.preprocess.workdir import WorkDir
+    from nbcalib.workdir import WorkDir
 
     wd = workdir if isinstance(workdir, WorkDir) else WorkDir(workdir)
     names = wd.names()

@@ -180,7 +180,7 @@ class ManualPicker:
     ):
         from nbcalib.errors import require
         from nbcalib.initial_guess.manual import read_manual_correspondences
-        from nbcalib.preprocess.workdir import WorkDir
+        from nbcalib.workdir import WorkDir
 
         plt = require("matplotlib.pyplot", "viz")
         widgets = require("matplotlib.widgets", "viz")

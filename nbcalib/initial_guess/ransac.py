@@ -4,7 +4,7 @@ Each hypothesis is the rotation that aligns the LiDAR bearings of two correspond
 camera bearings (Kabsch / Umeyama); its support is the number of correspondences whose LiDAR
 bearing, rotated and projected through the real camera model, lands within ``threshold`` pixels
 of the keypoint. Translation is ignored (far-field assumption); the Levenberg-Marquardt step
-(:mod:`nbcalib.initial_guess.refine`) recovers it.
+(:mod:`nbcalib.initial_guess.lm`) recovers it.
 
 Differences from the reference toolbox (reference_toolbox.md sections 1.4 and 5):
 

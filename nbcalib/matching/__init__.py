@@ -6,8 +6,8 @@
 - :class:`Matches`, :func:`read_matches_json`, :func:`write_matches_json`: the
   ``<name>_matches.json`` file of the reference toolbox (:mod:`~nbcalib.matching.matches`).
 - :func:`draw_matches`: the side-by-side picture (:mod:`~nbcalib.matching.draw`).
-- :mod:`~nbcalib.matching.export`: torch -> ONNX (``nbcalib models export``; needs torch).
-- :mod:`~nbcalib.matching.preprocess`: image normalisations across the modality gap.
+- :mod:`~nbcalib.matching.onnx_export`: torch -> ONNX (``nbcalib models export``; needs torch).
+- :mod:`~nbcalib.matching.normalize`: image normalisations across the modality gap.
 - :mod:`~nbcalib.matching.views`: camera-shaped LiDAR views (the real camera's model at the
   LiDAR's resolution, at several headings), matched by
   :func:`nbcalib.initial_guess.match_views`.

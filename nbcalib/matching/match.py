@@ -6,10 +6,10 @@ original, unrotated pixel coordinates of both images.
 
 Differences from the reference's ``find_matches_superglue.py``:
 
-- SuperGlue is replaced by permissively licensed models (:mod:`nbcalib.matching.export`).
+- SuperGlue is replaced by permissively licensed models (:mod:`nbcalib.matching.onnx_export`).
 - Rotated keypoints are mapped back exactly: a keypoint at column ``u'`` of an image rotated
   by 180 degrees is at ``W - 1 - u'`` (the reference uses ``W - u'``, one pixel off).
-- The images are normalised before matching (:mod:`nbcalib.matching.preprocess`).
+- The images are normalised before matching (:mod:`nbcalib.matching.normalize`).
 """
 
 from __future__ import annotations
@@ -259,7 +259,7 @@ def match_images(
         Shrink both images by one common factor so that no side is longer (None: no limit).
         The learned extractors' memory grows with the pixel count (ALIKED about 3 kB per pixel).
     camera_normalization, lidar_normalization : str, optional
-        :data:`~nbcalib.matching.preprocess.NORMALIZATIONS`.
+        :data:`~nbcalib.matching.normalize.NORMALIZATIONS`.
     lidar_fill_radius : int, optional
         Fill empty LiDAR pixels from filled ones this close (pixels; 0 = off) before
         normalising.
@@ -286,7 +286,7 @@ def match_images(
         A learned matcher was asked for by name but has not been exported (the message names
         the command that exports it).
     """
-    from nbcalib.matching.preprocess import fill_holes, normalize_image
+    from nbcalib.matching.normalize import fill_holes, normalize_image
 
     camera_image = _check_grey(camera_image, "camera_image")
     lidar_image = _check_grey(lidar_image, "lidar_image")

@@ -1,7 +1,7 @@
 """Learned keypoint matching at run time: onnxruntime sessions of exported extractor + matcher.
 
 Each learned matcher is two ONNX graphs in its own folder of the model directory, written by
-``nbcalib models export`` (:mod:`nbcalib.matching.export`, the only place that needs torch)::
+``nbcalib models export`` (:mod:`nbcalib.matching.onnx_export`, the only place that needs torch)::
 
     <model dir>/<name>/extractor.onnx   image (1, 1, H, W) float32 in [0, 1]
                                         -> keypoints (1, K, 2), scores (1, K), descriptors (1, K, D)

@@ -8,7 +8,7 @@ Modules (import them directly; this package imports nothing, so it stays cheap):
   de-duplication) or dynamic (motion-compensated continuous-time ICP).
 - :mod:`nbcalib.preprocess.lidar_image`: the LiDAR field of view, the virtual camera, z-buffer
   rendering of the intensity image and the index map, and hidden-point removal.
-- :mod:`nbcalib.preprocess.workdir`: reading and writing the work directory shared with the
+- :mod:`nbcalib.workdir`: reading and writing the work directory shared with the
   reference toolbox (``<name>.png``, ``<name>.ply``, ``<name>_lidar_intensities.png``,
   ``<name>_lidar_indices.png``, ``calib.json``).
 """

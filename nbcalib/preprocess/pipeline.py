@@ -280,7 +280,7 @@ def preprocess(
         make_virtual_camera,
         render_lidar_image,
     )
-    from nbcalib.preprocess.workdir import WorkDir, make_calib, set_virtual_camera
+    from nbcalib.workdir import WorkDir, make_calib, set_virtual_camera
 
     config = config or PreprocessConfig()
     log = log or (lambda line: print(line, file=sys.stderr))

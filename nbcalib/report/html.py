@@ -104,8 +104,8 @@ def make_report(
         No work directory, no ``calib.json``, no calibration result, or a missing or corrupt
         pair file; the message names the file and the command to run first.
     """
-    from nbcalib.preprocess.workdir import WorkDir
     from nbcalib.registration.refine import RegistrationPair
+    from nbcalib.workdir import WorkDir
 
     work = WorkDir(workdir)
     if not work.path.is_dir():

@@ -10,7 +10,7 @@ Pieces, each usable alone:
 - :mod:`~nbcalib.synthetic.motion`: ground-truth trajectories (nodding, driving, static);
 - :mod:`~nbcalib.synthetic.render`: camera images through any camera model;
 - :mod:`~nbcalib.synthetic.rig`: all of it together, one pair at a time;
-- :mod:`~nbcalib.synthetic.export`: files and bags as users have them (``nbcalib synth``).
+- :mod:`~nbcalib.synthetic.writer`: files and bags as users have them (``nbcalib synth``).
 
 Example
 -------

@@ -30,7 +30,7 @@ from nbcalib.camera import CameraModel
 from nbcalib.transforms import se3_exp, validate_T
 
 __all__ = [
-    "RefineResult",
+    "LMResult",
     "cauchy_loss",
     "refine_pose_lm",
     "reprojection_errors",
@@ -135,7 +135,7 @@ def reprojection_errors(
 
 
 @dataclass(frozen=True)
-class RefineResult:
+class LMResult:
     """Outcome of :func:`refine_pose_lm`.
 
     Attributes
@@ -174,7 +174,7 @@ def refine_pose_lm(
     function_tolerance: float = 1e-10,
     step_tolerance: float = 1e-10,
     gradient_tolerance: float = 1e-10,
-) -> RefineResult:
+) -> LMResult:
     """Minimise the Cauchy-robustified reprojection error over ``T_camera_lidar`` (paper Eq. 1).
 
     Parameters
@@ -203,7 +203,7 @@ def refine_pose_lm(
 
     Returns
     -------
-    RefineResult
+    LMResult
     """
     T, uv, points = _prepare(camera, T_camera_lidar_init, uv_camera, points_lidar)
     if not (np.isfinite(robust_kernel_width) and robust_kernel_width > 0.0):
@@ -264,7 +264,7 @@ def refine_pose_lm(
             break
     errors = np.full(len(uv), np.inf)
     errors[valid] = np.hypot(r[valid, 0], r[valid, 1])
-    return RefineResult(
+    return LMResult(
         T_camera_lidar=T,
         cost=cost,
         initial_cost=initial_cost,

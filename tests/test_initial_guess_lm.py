@@ -7,7 +7,7 @@ import pytest
 from numpy.testing import assert_allclose
 
 from nbcalib.camera import CAMERA_MODELS, example_camera
-from nbcalib.initial_guess.refine import (
+from nbcalib.initial_guess.lm import (
     cauchy_loss,
     refine_pose_lm,
     reprojection_errors,

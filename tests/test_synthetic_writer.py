@@ -16,9 +16,9 @@ from nbcalib.io.camera_file import load_camera
 from nbcalib.io.image import read_image
 from nbcalib.io.pointcloud import read_pointcloud
 from nbcalib.synthetic import RigConfig, lidar_preset
-from nbcalib.synthetic import export as export_module
-from nbcalib.synthetic.export import TOPICS, export_dataset, scan_fields
+from nbcalib.synthetic import writer as export_module
 from nbcalib.synthetic.rig import generate_sequence
+from nbcalib.synthetic.writer import TOPICS, export_dataset, scan_fields
 
 pytest.importorskip("rosbags")
 

@@ -17,7 +17,9 @@ from tolerances import TOL
 from nbcalib.camera import example_camera
 from nbcalib.cli import main
 from nbcalib.errors import InputError
-from nbcalib.export import (
+from nbcalib.io.calib_json import CalibFile, write_calib_json
+from nbcalib.io.camera_file import load_camera
+from nbcalib.io.extrinsic_formats import (
     FILE_NAMES,
     export_result,
     load_result,
@@ -29,8 +31,6 @@ from nbcalib.export import (
     tf2_text,
     urdf_text,
 )
-from nbcalib.io.calib_json import CalibFile, write_calib_json
-from nbcalib.io.camera_file import load_camera
 from nbcalib.transforms import (
     invert_T,
     make_T,
