@@ -1,4 +1,4 @@
-"""Benchmark: dense clouds by continuous-time ICP (nbcalib.preprocess.integrate.integrate_dynamic).
+"""Benchmark: dense clouds by continuous-time ICP (nbcalib.odometry.integrate_dynamic).
 
 Two parts:
 
@@ -11,7 +11,7 @@ Two parts:
   distance of the points on planar primitives (rectangles, box faces) to their true surface, for
   the deskewed cloud, for the same scans placed rigidly at their estimated mid-scan pose (no
   deskewing), and for the ground-truth deskewing (the floor: range noise); plus the local-PCA
-  thickness (:func:`nbcalib.preprocess.integrate.local_thickness`) of the same clouds.
+  thickness (:func:`nbcalib.odometry.local_thickness`) of the same clouds.
 - ``kitti``: the 20 real KITTI frames (``../shared/data/real/kitti_raw_2011_09_26``, Velodyne
   HDL-64E, ~114 k points a scan, 0.1 s apart, no per-point times: synthesised from the azimuth).
   Speed (best of ``--repeat`` runs, wall and CPU time of the process, with the 1-minute load
@@ -36,7 +36,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nbcalib.preprocess.integrate import (
+from nbcalib.odometry import (
     DynamicIntegrationConfig,
     deskew,
     integrate_dynamic,

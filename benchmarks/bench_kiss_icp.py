@@ -28,8 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nbcalib.preprocess.integrate import (
-    DynamicIntegrationConfig,
+from nbcalib.odometry import (
     integrate_dynamic,
     normalized_scan_times,
     synthesize_times_from_azimuth,
@@ -104,10 +103,9 @@ def main():
     xyz = [s[:, :3].astype(np.float64) for s in scans]
     stamps = [normalized_scan_times(synthesize_times_from_azimuth(p, 10.0))[0] for p in xyz]
 
-    config = DynamicIntegrationConfig(min_distance=MIN_RANGE)
-    integrate_dynamic(scans[:3], config=config)  # warm the JIT
+    integrate_dynamic(scans[:3], min_distance=MIN_RANGE)  # warm the JIT
     cloud, ours_wall, ours_cpu = _best_of(
-        args.repeat, lambda: integrate_dynamic(scans, config=config)
+        args.repeat, lambda: integrate_dynamic(scans, min_distance=MIN_RANGE)
     )
     run_kiss_icp(xyz[:3], stamps[:3])  # warm up
     kiss, kiss_wall, kiss_cpu = _best_of(args.repeat, lambda: run_kiss_icp(xyz, stamps))

@@ -136,7 +136,7 @@ def kitti_pair(frame: int):
 
 def kitti_accumulated_pair(count: int):
     """The first ``count`` KITTI scans accumulated with motion compensation, image of frame 0."""
-    from nbcalib.preprocess.integrate import integrate_dynamic
+    from nbcalib.odometry import integrate_dynamic
 
     root = REAL / "kitti_raw_2011_09_26"
     scans = [

@@ -114,7 +114,7 @@ def accumulated_pair(
     scan), the same cloud in the LiDAR frame at the image time, and the distance between the two
     frames (metres).
     """
-    from nbcalib.preprocess.integrate import DynamicIntegrationConfig, integrate_dynamic
+    from nbcalib.odometry import integrate_dynamic
     from nbcalib.preprocess.intensity import equalize_image, equalize_point_intensities
 
     inputs = gather_files(
@@ -123,12 +123,12 @@ def accumulated_pair(
         config,
         name=f"{first:010d}",
     )
-    dyn = DynamicIntegrationConfig(
+    cloud = integrate_dynamic(
+        inputs.scans,
         voxel_size=config.voxel_size,
         min_distance=config.min_distance,
         frame_rate=config.frame_rate,
     )
-    cloud = integrate_dynamic(inputs.scans, config=dyn)
     intensities = equalize_point_intensities(cloud.intensity)
     image = equalize_image(inputs.image)
     T_first_image = interpolate_pose(

@@ -6,7 +6,7 @@ script calibrates from a perturbed start with :func:`nbcalib.registration.refine
 the result with :func:`nbcalib.report.assess` (variance scale 1), and stores everything.
 
 By default the pairs are of the size ``nbcalib demo`` makes (640 x 480 images, 1 s of LiDAR data,
-the whole cloud on a 0.02 m voxel grid: :func:`nbcalib.preprocess.integrate.voxel_deduplicate`
+the whole cloud on a 0.02 m voxel grid: :func:`nbcalib.odometry.voxel_deduplicate`
 of the scans deskewed with the true trajectory, points nearer than 1 m dropped, as preprocess
 does; intensities and image equalised) and fine registration runs with the default
 ``RefineConfig`` on serial kernels. ``--image-size 400x300 --max-points 20000 --duration 0.3``
@@ -51,7 +51,7 @@ from pathlib import Path
 import numpy as np
 
 from nbcalib.metrics import pose_errors
-from nbcalib.preprocess.integrate import voxel_deduplicate
+from nbcalib.odometry import voxel_deduplicate
 from nbcalib.preprocess.intensity import equalize_image, equalize_point_intensities
 from nbcalib.preprocess.pipeline import PreprocessConfig
 from nbcalib.registration.refine import RefineConfig, RegistrationPair, refine

@@ -30,11 +30,8 @@ import os
 import matplotlib.pyplot as plt
 import numpy as np
 
-from nbcalib.preprocess.integrate import (
-    integrate_dynamic,
-    integrate_static,
-    local_thickness,
-)
+from nbcalib.odometry import integrate_dynamic, local_thickness
+from nbcalib.preprocess.accumulate import integrate_static
 from nbcalib.synthetic import RigConfig, generate_sequence
 from nbcalib.transforms import invert_T, pose_error
 

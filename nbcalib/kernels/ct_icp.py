@@ -310,7 +310,7 @@ def _select_points(
 
     A row counts when x, y, z, its intensity (and its time, with ``has_times``) are finite. The
     times are the given ones or, without ``has_times``, the azimuth times of
-    :func:`nbcalib.preprocess.integrate.synthesize_times_from_azimuth`; ``s = (t - t_min) /
+    :func:`nbcalib.odometry.scans.synthesize_times_from_azimuth`; ``s = (t - t_min) /
     (t_max - t_min)`` over all finite rows (0 when they share one time). Returns ``(points (M, 3),
     intensity (M,), s (M,), number of finite rows, t_max - t_min)``; ``s`` is empty unless
     ``want_s``.

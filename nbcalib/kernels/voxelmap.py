@@ -12,7 +12,7 @@ table with linear probing:
 - ``n_slots`` : int64 (1,); slots ``0 .. n_slots[0] - 1`` are in use, numbered in order of first
   appearance, which is what makes every output order deterministic.
 
-The callers (:class:`nbcalib.preprocess.integrate.VoxelMap` and the accumulator there) keep
+The callers (:class:`nbcalib.odometry.voxelmap.VoxelMap` and the accumulator there) keep
 ``n_slots + number of new points <= S`` and the load of the table at most
 :data:`MAX_LOAD` before every insertion, so the kernels never run out of room and probe
 sequences stay short.

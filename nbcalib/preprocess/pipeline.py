@@ -228,11 +228,8 @@ def _to_uint8(image: np.ndarray) -> np.ndarray:
 
 
 def _accumulate(pair: PairInput, mode: str, config: PreprocessConfig, progress):
-    from nbcalib.preprocess.integrate import (
-        DynamicIntegrationConfig,
-        integrate_dynamic,
-        integrate_static,
-    )
+    from nbcalib.odometry import integrate_dynamic
+    from nbcalib.preprocess.accumulate import integrate_static
 
     if mode == "static":
         return integrate_static(
@@ -241,12 +238,13 @@ def _accumulate(pair: PairInput, mode: str, config: PreprocessConfig, progress):
             min_distance=config.min_distance,
             progress=progress,
         )
-    dyn = DynamicIntegrationConfig(
+    return integrate_dynamic(
+        pair.scans,
         voxel_size=config.voxel_size,
         min_distance=config.min_distance,
         frame_rate=config.frame_rate,
+        progress=progress,
     )
-    return integrate_dynamic(pair.scans, config=dyn, progress=progress)
 
 
 def preprocess(
