@@ -8,7 +8,8 @@ Stages of the method and where they live:
 - conventions and rigid transforms: :mod:`nbcalib.transforms` (``docs/conventions.md``)
 - camera models: :mod:`nbcalib.camera`
 - ``calib.json`` and other files: :mod:`nbcalib.io`
-- dense clouds, LiDAR images, work directories: :mod:`nbcalib.preprocess`
+- dense clouds, LiDAR images, work directories: :mod:`nbcalib.preprocess`; the LiDAR
+  odometry (continuous-time ICP, deskewing) for a moving LiDAR: :mod:`nbcalib.odometry`
 - fine registration (NID): :mod:`nbcalib.registration`
 - numba kernels: :mod:`nbcalib.kernels`, with slow references in :mod:`nbcalib.reference`
 - the whole pipeline from Python: :func:`nbcalib.calibrate` (:mod:`nbcalib.api`); from the
@@ -30,6 +31,7 @@ _SUBMODULES = {
     "cli",
     "metrics",
     "preprocess",
+    "odometry",
     "registration",
     "api",
     "config",
