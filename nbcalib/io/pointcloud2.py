@@ -7,8 +7,8 @@ the fields (with the offsets and ``point_step`` as item size), so any datatype, 
 padding is decoded by NumPy in one pass, never point by point.
 
 The functions take any object with the message's attributes (a rosbags message or a stand-in), so
-they work for ROS 1 and ROS 2 alike. Building a message is left to :mod:`nbcalib.io.bag`, which
-owns the type store: :func:`pack_pointcloud2` returns the parts.
+they work for ROS 1 and ROS 2 alike. Building a message is left to :mod:`nbcalib.io.bag_writer`,
+which holds the type store: :func:`pack_pointcloud2` returns the parts.
 """
 
 from __future__ import annotations

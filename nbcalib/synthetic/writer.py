@@ -116,7 +116,7 @@ def write_sequence_bag(sequence: SyntheticSequence, path, fmt: str, *, stamp_ns:
     stamp_ns : int
         Stamp of the image and of the first scan, nanoseconds.
     """
-    from nbcalib.io.bag import BagWriter
+    from nbcalib.io.bag_writer import BagWriter
 
     lidar, camera = FRAMES["lidar"], FRAMES["camera"]
     with BagWriter(path, fmt) as bag:
