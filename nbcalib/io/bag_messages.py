@@ -32,6 +32,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from nbcalib.errors import InputError, require
+from nbcalib.io._fields import buffer_array, native_columns
 
 if TYPE_CHECKING:
     from nbcalib.camera import CameraModel
@@ -157,10 +158,7 @@ def parse_livox_raw(raw: bytes, *, cdr: bool) -> tuple[int, dict[str, np.ndarray
     if len(buffer) < stride * count:  # the last CDR point has no trailing padding
         buffer = buffer + bytes(stride * count - len(buffer))
     points = np.frombuffer(buffer, dtype=dtype, count=count)
-    fields = {
-        name: np.ascontiguousarray(points[name], dtype=points[name].dtype.newbyteorder("="))
-        for name in _LIVOX_ORDER
-    }
+    fields = native_columns(points, _LIVOX_ORDER)
     return int(sec) * 1_000_000_000 + int(nanosec), fields
 
 
@@ -273,12 +271,7 @@ def decode_image(msg, *, grey: bool = True, source=None) -> np.ndarray:
     height, width, step = int(msg.height), int(msg.width), int(msg.step)
     row_bytes = width * channels * dtype.itemsize
     step = step or row_bytes
-    data = (
-        np.frombuffer(msg.data, dtype=np.uint8)
-        if not isinstance(msg.data, np.ndarray)
-        else msg.data
-    )
-    data = data.reshape(-1).view(np.uint8)
+    data = buffer_array(msg.data).reshape(-1).view(np.uint8)
     if step < row_bytes or data.size < (height - 1) * step + row_bytes or height * width == 0:
         raise InputError(
             f"{encoding} image data of {data.size} bytes does not hold {height} x {width} "
@@ -309,12 +302,8 @@ def decode_compressed_image(msg, *, grey: bool = True, source=None) -> np.ndarra
 
     from nbcalib.io.image import _from_bgr
 
-    data = (
-        np.frombuffer(msg.data, dtype=np.uint8)
-        if not isinstance(msg.data, np.ndarray)
-        else msg.data
-    )
-    image = cv2.imdecode(np.ascontiguousarray(data, dtype=np.uint8), cv2.IMREAD_UNCHANGED)
+    data = np.ascontiguousarray(buffer_array(msg.data), dtype=np.uint8)
+    image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
     if image is None:
         raise InputError(f"cannot decode compressed image (format '{msg.format}')", path=source)
     if image.dtype not in (np.uint8, np.uint16):

@@ -22,7 +22,13 @@ from pathlib import Path
 import numpy as np
 
 from nbcalib.errors import InputError
-from nbcalib.io._fields import ascii_rows, struct_to_fields
+from nbcalib.io._fields import (
+    ascii_rows,
+    buffer_array,
+    field_arrays,
+    fill_table,
+    struct_to_fields,
+)
 from nbcalib.io._files import read_bytes, write_bytes_atomic
 
 _PCD_TYPES = {
@@ -243,14 +249,7 @@ def _pcd_type_code(dtype: np.dtype) -> tuple[str, int]:
 
 def _as_field_table(fields: Mapping[str, np.ndarray]) -> tuple[np.ndarray, int]:
     """Pack named (N,) / (N, count) arrays into one little-endian structured array."""
-    if not fields:
-        raise ValueError("no fields to write")
-    arrays = {name: np.asarray(values) for name, values in fields.items()}
-    lengths = {values.shape[0] if values.ndim else -1 for values in arrays.values()}
-    if len(lengths) != 1 or -1 in lengths:
-        shapes = {name: values.shape for name, values in arrays.items()}
-        raise ValueError(f"fields must be (N,) or (N, count) arrays of one length N, got {shapes}")
-    n = lengths.pop()
+    arrays, n = field_arrays(fields, action="write")
     layout = []
     for name, values in arrays.items():
         if values.ndim > 2 or not re.fullmatch(r"[A-Za-z_][A-Za-z0-9_]*", name):
@@ -258,10 +257,7 @@ def _as_field_table(fields: Mapping[str, np.ndarray]) -> tuple[np.ndarray, int]:
         count = values.shape[1] if values.ndim == 2 else 1
         _pcd_type_code(values.dtype.newbyteorder("="))  # validates the type
         layout.append((name, values.dtype.newbyteorder("<"), (count,) if values.ndim == 2 else ()))
-    table = np.empty(n, dtype=np.dtype(layout))
-    for name, values in arrays.items():
-        table[name] = values
-    return table, n
+    return fill_table(arrays, layout, n), n
 
 
 def write_pcd(path, fields: Mapping[str, np.ndarray], *, encoding: str = "binary") -> None:
@@ -348,8 +344,7 @@ def lzf_decompress(data, size: int) -> np.ndarray:
         _lzf_decompress,
     )
 
-    src = np.frombuffer(data, dtype=np.uint8) if not isinstance(data, np.ndarray) else data
-    src = np.ascontiguousarray(src, dtype=np.uint8)
+    src = np.ascontiguousarray(buffer_array(data), dtype=np.uint8)
     dst = np.empty(int(size), dtype=np.uint8)
     written = _lzf_decompress(src, dst)
     problems = {
@@ -378,8 +373,7 @@ def lzf_compress(data) -> bytes:
     """
     from nbcalib.kernels.lzf import _lzf_compress
 
-    src = np.frombuffer(data, dtype=np.uint8) if not isinstance(data, np.ndarray) else data
-    src = np.ascontiguousarray(src.reshape(-1).view(np.uint8))
+    src = np.ascontiguousarray(buffer_array(data).reshape(-1).view(np.uint8))
     dst = np.empty(src.shape[0] + src.shape[0] // 32 + 2, dtype=np.uint8)
     written = _lzf_compress(src, dst)
     return dst[:written].tobytes()

@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 
 from nbcalib.errors import InputError
-from nbcalib.io._fields import ascii_rows, struct_to_fields
+from nbcalib.io._fields import ascii_rows, fill_table, struct_to_fields
 from nbcalib.io._files import read_bytes, write_bytes_atomic
 from nbcalib.io.pointcloud import PointCloud, pointcloud_from_fields
 
@@ -200,9 +200,7 @@ def write_ply(
             )
         columns["intensity"] = intensity
     n = points.shape[0]
-    table = np.empty(n, dtype=[(name, "<f4") for name in columns])
-    for name, values in columns.items():
-        table[name] = values
+    table = fill_table(columns, [(name, "<f4") for name in columns], n)
     header = "".join(
         [
             "ply\n",

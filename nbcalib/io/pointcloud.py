@@ -97,18 +97,7 @@ def select_intensity_field(
     InputError
         A named channel that does not exist; the message lists the available fields.
     """
-    names = list(names)
-    if intensity_channel is None or intensity_channel == "none":
-        return None
-    if intensity_channel == "auto":
-        return next((n for n in INTENSITY_PRIORITY if n in names), None)
-    if intensity_channel not in names:
-        raise InputError(
-            f"intensity channel '{intensity_channel}' not found; available fields: "
-            f"{', '.join(names) or '(none)'}",
-            path=source,
-        )
-    return intensity_channel
+    return _select_field(names, intensity_channel, INTENSITY_PRIORITY, "intensity channel", source)
 
 
 def select_time_field(
@@ -118,18 +107,24 @@ def select_time_field(
 
     None or ``"none"`` means no times; any other name must exist (else :class:`InputError`).
     """
+    return _select_field(names, time_field, TIME_FIELDS, "time field", source)
+
+
+def _select_field(
+    names, choice: str | None, auto: tuple[str, ...], what: str, source
+) -> str | None:
+    """None for None / "none", the first of ``auto`` present for "auto", else ``choice`` checked."""
     names = list(names)
-    if time_field is None or time_field == "none":
+    if choice is None or choice == "none":
         return None
-    if time_field == "auto":
-        return next((n for n in TIME_FIELDS if n in names), None)
-    if time_field not in names:
+    if choice == "auto":
+        return next((n for n in auto if n in names), None)
+    if choice not in names:
         raise InputError(
-            f"time field '{time_field}' not found; available fields: "
-            f"{', '.join(names) or '(none)'}",
+            f"{what} '{choice}' not found; available fields: {', '.join(names) or '(none)'}",
             path=source,
         )
-    return time_field
+    return choice
 
 
 def normalize_point_times(raw: np.ndarray) -> np.ndarray:
