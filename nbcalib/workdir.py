@@ -362,7 +362,7 @@ class WorkDir:
             Rendered from exactly these points (its indices refer to their rows).
         """
         from nbcalib.io.image import write_png
-        from nbcalib.io.pointcloud import write_ply
+        from nbcalib.io.ply import write_ply
 
         _check_name(name)
         image = np.asarray(image)
@@ -433,7 +433,7 @@ class WorkDir:
             points the cloud does not have; the message names the file.
         """
         from nbcalib.io.image import read_image
-        from nbcalib.io.pointcloud import read_ply_fields
+        from nbcalib.io.ply import read_ply_fields
 
         _check_name(name)
         image = _read_uint8(self.image_path(name), read_image)

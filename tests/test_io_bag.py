@@ -1,33 +1,19 @@
-"""PointCloud2 decoding, ROS image encodings, bag round trips (ROS 1, ROS 2 sqlite3, ROS 2 mcap),
-topic selection, corrupt bags, and the three real KITTI bags."""
+"""Bag round trips (ROS 1, ROS 2 sqlite3, ROS 2 mcap) with BagWriter, Livox CustomMsg, topic
+selection, corrupt bags, and the three real KITTI bags."""
 
 from __future__ import annotations
 
 import json
-import struct
-from types import SimpleNamespace
 
-import cv2
 import numpy as np
 import pytest
 
 from nbcalib.errors import InputError
-from nbcalib.io.pointcloud2 import (
-    POINTFIELD_DTYPES,
-    PointFieldSpec,
-    pack_pointcloud2,
-    pointcloud2_to_fields,
-    pointcloud2_to_pointcloud,
-)
 
 pytest.importorskip("rosbags")
 
 from nbcalib.camera import create_camera
 from nbcalib.io.bag import (
-    BagWriter,
-    _parse_livox_raw,
-    decode_compressed_image,
-    decode_image,
     list_topics,
     open_bag,
     read_camera_info,
@@ -35,194 +21,12 @@ from nbcalib.io.bag import (
     read_pointclouds,
     read_tf_static,
 )
+from nbcalib.io.bag_messages import parse_livox_raw
+from nbcalib.io.bag_writer import BagWriter
 from nbcalib.io.image import read_image, rgb_to_grey
 from nbcalib.io.pointcloud import read_pointcloud
 
 FORMATS = [("bag1", "test.bag"), ("bag2", "test_db3"), ("mcap", "test_mcap")]
-_STRUCT_CODES = {1: "b", 2: "B", 3: "h", 4: "H", 5: "i", 6: "I", 7: "f", 8: "d"}
-
-# ------------------------------------------------------------------------------ PointCloud2
-
-
-def _unpack_point_by_point(msg) -> dict[str, list]:
-    """Slow reference: struct.unpack every field of every point, honouring row_step."""
-    order = ">" if msg.is_bigendian else "<"
-    out = {f.name: [] for f in msg.fields}
-    data = bytes(msg.data)
-    for row in range(msg.height):
-        for col in range(msg.width):
-            base = row * msg.row_step + col * msg.point_step
-            for f in msg.fields:
-                code = order + _STRUCT_CODES[f.datatype] * f.count
-                values = struct.unpack_from(code, data, base + f.offset)
-                out[f.name].append(values if f.count > 1 else values[0])
-    return out
-
-
-def _message(fields, height, width, point_step, row_step, data, big=False):
-    return SimpleNamespace(
-        fields=[SimpleNamespace(name=n, offset=o, datatype=d, count=c) for n, o, d, c in fields],
-        height=height,
-        width=width,
-        point_step=point_step,
-        row_step=row_step,
-        is_bigendian=big,
-        data=np.frombuffer(data, np.uint8),
-    )
-
-
-@pytest.mark.parametrize("big", [False, True])
-def test_pointcloud2_every_datatype_count_and_padding(rng, big):
-    # every datatype, a count-3 field, gaps between fields, point and row padding
-    layout = [
-        ("x", 0, 7, 1),
-        ("y", 4, 7, 1),
-        ("z", 8, 7, 1),
-        ("i8", 12, 1, 1),
-        ("u8", 13, 2, 1),
-        ("i16", 14, 3, 1),
-        ("u16", 16, 4, 1),
-        ("i32", 20, 5, 1),
-        ("u32", 24, 6, 1),
-        ("f64", 32, 8, 1),
-        ("normal", 40, 7, 3),
-    ]
-    height, width, point_step = 3, 7, 60
-    row_step = width * point_step + 13
-    data = rng.integers(0, 256, height * row_step).astype(np.uint8).tobytes()
-    msg = _message(layout, height, width, point_step, row_step, data, big)
-    fields = pointcloud2_to_fields(msg)
-    expected = _unpack_point_by_point(msg)
-    assert list(fields) == [name for name, *_ in layout]
-    for name, _, datatype, count in layout:
-        assert fields[name].dtype == POINTFIELD_DTYPES[datatype].newbyteorder("=")
-        assert fields[name].shape == ((21, 3) if count == 3 else (21,))
-        assert np.array_equal(fields[name], np.array(expected[name]), equal_nan=True), name
-
-
-def test_pointcloud2_pack_round_trip_and_rules(rng):
-    n = 500
-    fields = {
-        "x": rng.normal(size=n).astype(np.float32),
-        "y": rng.normal(size=n).astype(np.float32),
-        "z": rng.normal(size=n).astype(np.float32),
-        "intensity": rng.random(n).astype(np.float32),
-        "reflectivity": rng.integers(0, 65535, n).astype(np.uint16),
-        "t": np.arange(n, dtype=np.uint32) * 200_000,  # ns (Ouster)
-        "ring": rng.integers(0, 128, n).astype(np.uint8),
-        "rgb": rng.integers(0, 255, (n, 3)).astype(np.uint8),
-    }
-    fields["x"][7] = np.nan
-    specs, point_step, data = pack_pointcloud2(fields)
-    assert point_step == 12 + 4 + 2 + 4 + 1 + 3
-    assert specs[4] == PointFieldSpec("reflectivity", 16, 4, 1)
-    msg = _message(
-        [(s.name, s.offset, s.datatype, s.count) for s in specs],
-        1,
-        n,
-        point_step,
-        n * point_step,
-        data.tobytes(),
-    )
-    decoded = pointcloud2_to_fields(msg)
-    for name in fields:
-        assert np.array_equal(decoded[name], fields[name], equal_nan=True), name
-    cloud = pointcloud2_to_pointcloud(msg)
-    assert len(cloud) == n - 1  # the NaN point is dropped
-    assert np.array_equal(cloud.intensity, np.delete(fields["reflectivity"], 7).astype(float))
-    assert np.allclose(cloud.times, np.delete(np.arange(n) * 2e-4, 7))
-    with pytest.raises(ValueError, match="cannot store int64"):
-        pack_pointcloud2({"x": np.zeros(3, np.int64)})
-
-
-def test_pointcloud2_bad_messages_raise_input_error():
-    msg = _message([("x", 0, 9, 1)], 1, 2, 4, 8, bytes(8))
-    with pytest.raises(InputError, match="unknown datatype 9"):
-        pointcloud2_to_fields(msg, source="a.bag /points")
-    msg = _message([("x", 0, 7, 1), ("y", 4, 8, 1)], 1, 2, 8, 16, bytes(16))
-    with pytest.raises(InputError, match="does not fit in point_step 8"):
-        pointcloud2_to_fields(msg)
-    msg = _message([("x", 0, 7, 1)], 2, 10, 4, 40, bytes(50))
-    with pytest.raises(InputError, match="holds 50 bytes, expected 80") as info:
-        pointcloud2_to_fields(msg, source="a.bag /points")
-    assert str(info.value).startswith("a.bag /points: ")
-    msg = _message([("x", 0, 7, 1), ("y", 4, 7, 1)], 1, 2, 8, 16, bytes(16))
-    with pytest.raises(InputError, match="no z field"):
-        pointcloud2_to_pointcloud(msg)
-
-
-# --------------------------------------------------------------------------------- images
-
-
-def _image_msg(pixels: np.ndarray, encoding: str, *, pad=0, big=False):
-    h = pixels.shape[0]
-    rows = pixels.reshape(h, -1)
-    dtype = rows.dtype.newbyteorder(">" if big else "<")
-    raw = rows.astype(dtype).view(np.uint8).reshape(h, -1)
-    raw = np.concatenate([raw, np.zeros((h, pad), np.uint8)], axis=1)
-    return SimpleNamespace(
-        height=h,
-        width=pixels.shape[1],
-        encoding=encoding,
-        is_bigendian=int(big),
-        step=raw.shape[1],
-        data=raw.reshape(-1),
-    )
-
-
-def test_image_encodings(rng):
-    rgb = rng.integers(0, 256, (6, 8, 3)).astype(np.uint8)
-    grey = rgb_to_grey(rgb)
-    alpha = rng.integers(0, 256, (6, 8, 1)).astype(np.uint8)
-    cases = {
-        "rgb8": rgb,
-        "bgr8": rgb[..., ::-1],
-        "8UC3": rgb[..., ::-1],
-        "rgba8": np.concatenate([rgb, alpha], axis=2),
-        "bgra8": np.concatenate([rgb[..., ::-1], alpha], axis=2),
-    }
-    for encoding, pixels in cases.items():
-        msg = _image_msg(np.ascontiguousarray(pixels), encoding, pad=5)
-        assert np.array_equal(decode_image(msg, grey=False), rgb), encoding
-        assert np.array_equal(decode_image(msg), grey), encoding
-    mono = rng.integers(0, 65536, (5, 7)).astype(np.uint16)
-    for encoding in ("mono16", "16UC1"):
-        for big in (False, True):
-            out = decode_image(_image_msg(mono, encoding, pad=2, big=big))
-            assert out.dtype == np.uint16 and np.array_equal(out, mono)
-    assert np.array_equal(decode_image(_image_msg(grey, "mono8", pad=3)), grey)
-
-
-def test_bayer_and_yuv_match_opencv(rng):
-    raw = rng.integers(0, 256, (8, 10)).astype(np.uint8)
-    out = decode_image(_image_msg(raw, "bayer_rggb8"), grey=False)
-    assert np.array_equal(out, cv2.cvtColor(raw, cv2.COLOR_BayerBG2RGB))  # OpenCV's legacy name
-    yuv = rng.integers(0, 256, (4, 6, 2)).astype(np.uint8)
-    out = decode_image(_image_msg(yuv, "yuv422"))
-    assert np.array_equal(out, cv2.cvtColor(yuv, cv2.COLOR_YUV2GRAY_UYVY))
-
-
-def test_bad_image_messages():
-    with pytest.raises(InputError, match="unsupported image encoding '32FC1'"):
-        decode_image(_image_msg(np.zeros((2, 2), np.float32), "32FC1"), source="b.bag /depth")
-    msg = _image_msg(np.zeros((4, 4), np.uint8), "mono8")
-    msg.data = msg.data[:10]
-    with pytest.raises(InputError, match="does not hold 4 x 4 pixels"):
-        decode_image(msg)
-    with pytest.raises(InputError, match="cannot decode compressed image"):
-        decode_compressed_image(SimpleNamespace(format="jpeg", data=np.zeros(20, np.uint8)))
-
-
-def test_compressed_image_png_16bit_and_jpeg(rng):
-    mono16 = rng.integers(0, 65536, (9, 11)).astype(np.uint16)
-    png = cv2.imencode(".png", mono16)[1].reshape(-1)
-    assert np.array_equal(decode_compressed_image(SimpleNamespace(format="png", data=png)), mono16)
-    rgb = np.zeros((16, 16, 3), np.uint8)
-    rgb[..., 0] = 200  # red
-    jpg = cv2.imencode(".jpg", rgb[..., ::-1])[1].reshape(-1)
-    out = decode_compressed_image(SimpleNamespace(format="jpeg", data=jpg), grey=False)
-    assert np.abs(out.astype(int) - rgb).max() <= 3
-
 
 # ------------------------------------------------------------------------------ bag round trips
 
@@ -344,7 +148,7 @@ def test_livox_custom_msg(tmp_path, rng, fmt, name, package):
     # the byte-level fast path agrees with rosbags' own deserialisation (the fallback)
     with open_bag(path) as bag:
         [(_, msgtype, raw), _] = list(bag.raw_messages("/livox/lidar"))
-        parsed_stamp, parsed = _parse_livox_raw(bytes(raw), cdr=fmt != "bag1")
+        parsed_stamp, parsed = parse_livox_raw(bytes(raw), cdr=fmt != "bag1")
         msg = bag._deserialize(raw, msgtype, "/livox/lidar")
     assert parsed_stamp == 5_000_000_123
     assert np.array_equal(parsed["offset_time"], [p.offset_time for p in msg.points])
@@ -361,7 +165,7 @@ def test_livox_fallback_equals_fast_path(tmp_path, rng, monkeypatch):
     with BagWriter(tmp_path / "l_mcap", "mcap") as bag:
         bag.write_livox("/livox", 1_000, fields, "livox")
     fast = next(read_pointclouds(tmp_path / "l_mcap"))
-    monkeypatch.setattr(bag_module, "_parse_livox_raw", lambda raw, cdr: None)
+    monkeypatch.setattr(bag_module, "parse_livox_raw", lambda raw, cdr: None)
     slow = next(read_pointclouds(tmp_path / "l_mcap"))
     assert fast[0] == slow[0] == 1_000
     for key in fast[1].fields:

@@ -9,7 +9,7 @@ import pytest
 
 from nbcalib.cli import main
 from nbcalib.io.image import write_png
-from nbcalib.io.pointcloud import write_pcd
+from nbcalib.io.pcd import write_pcd
 from nbcalib.workdir import WorkDir
 
 

@@ -223,7 +223,7 @@ def test_write_pair_removes_stale_matches_and_checks_inputs(rng, tmp_path):
 
 
 def test_load_pair_reports_inconsistent_files(rng, tmp_path):
-    from nbcalib.io.pointcloud import write_ply
+    from nbcalib.io.ply import write_ply
 
     workdir = WorkDir(tmp_path / "job")
     _write_job(workdir, rng, ["a"])

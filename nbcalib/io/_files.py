@@ -1,4 +1,6 @@
-"""Atomic file writes: readers see the old file or the new one, whole, never a half-written one.
+"""Whole-file reads that fail with an InputError, and atomic writes.
+
+Atomic writes: readers see the old file or the new one, whole, never a half-written one.
 
 Every writer in nbcalib that replaces a file goes through :func:`write_bytes_atomic`: the data goes
 to a uniquely named temporary file in the same folder (opened exclusively, so it gets the umask's
@@ -15,6 +17,8 @@ from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
+
+from nbcalib.errors import InputError
 
 
 def write_bytes_atomic(path, parts: Iterable[bytes | memoryview | np.ndarray]) -> None:
@@ -38,3 +42,18 @@ def write_bytes_atomic(path, parts: Iterable[bytes | memoryview | np.ndarray]) -
 def write_text_atomic(path, text: str) -> None:
     """Replace ``path`` with ``text`` (UTF-8, newlines as given), atomically."""
     write_bytes_atomic(path, [text.encode("utf-8")])
+
+
+def read_bytes(path: Path) -> bytes:
+    """The whole file; a missing, unreadable or empty file is an InputError naming it."""
+    try:
+        data = path.read_bytes()
+    except FileNotFoundError:
+        raise InputError("file not found", path=path) from None
+    except IsADirectoryError:
+        raise InputError("is a directory, expected a file", path=path) from None
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", path=path) from None
+    if not data:
+        raise InputError("empty file", path=path)
+    return data

@@ -7,8 +7,8 @@ the fields (with the offsets and ``point_step`` as item size), so any datatype, 
 padding is decoded by NumPy in one pass, never point by point.
 
 The functions take any object with the message's attributes (a rosbags message or a stand-in), so
-they work for ROS 1 and ROS 2 alike. Building a message is left to :mod:`nbcalib.io.bag`, which
-owns the type store: :func:`pack_pointcloud2` returns the parts.
+they work for ROS 1 and ROS 2 alike. Building a message is left to :mod:`nbcalib.io.bag_writer`,
+which holds the type store: :func:`pack_pointcloud2` returns the parts.
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nbcalib.errors import InputError
+from nbcalib.io._fields import buffer_array, field_arrays, fill_table, native_columns
 from nbcalib.io.pointcloud import PointCloud, pointcloud_from_fields
 
 #: PointField datatype constants (sensor_msgs/PointField) and their NumPy types.
@@ -121,12 +122,7 @@ def pointcloud2_to_fields(msg, *, source=None) -> dict[str, np.ndarray]:
     dtype = pointcloud2_dtype(
         msg.fields, point_step, is_bigendian=bool(msg.is_bigendian), source=source
     )
-    data = (
-        np.frombuffer(msg.data, dtype=np.uint8)
-        if not isinstance(msg.data, np.ndarray)
-        else msg.data
-    )
-    data = data.reshape(-1).view(np.uint8)
+    data = buffer_array(msg.data).reshape(-1).view(np.uint8)
     n = height * width
     if n == 0:
         points = np.zeros(0, dtype=dtype)
@@ -153,11 +149,7 @@ def pointcloud2_to_fields(msg, *, source=None) -> dict[str, np.ndarray]:
                 data, shape=(height, row_bytes), strides=(row_step, 1), writeable=False
             )
             points = np.ascontiguousarray(rows).reshape(-1).view(dtype)
-    fields = {}
-    for name in dtype.names:
-        column = points[name]
-        fields[name] = np.ascontiguousarray(column, dtype=column.dtype.newbyteorder("="))
-    return fields
+    return native_columns(points, dtype.names)
 
 
 def pointcloud2_to_pointcloud(
@@ -208,14 +200,7 @@ def pack_pointcloud2(
     ValueError
         A dtype PointField cannot express (int64, uint64, bool, ...), or unequal lengths.
     """
-    if not fields:
-        raise ValueError("no fields to pack")
-    arrays = {name: np.asarray(values) for name, values in fields.items()}
-    lengths = {values.shape[0] if values.ndim in (1, 2) else -1 for values in arrays.values()}
-    if len(lengths) != 1 or -1 in lengths:
-        shapes = {name: values.shape for name, values in arrays.items()}
-        raise ValueError(f"fields must be (N,) or (N, count) arrays of one length N, got {shapes}")
-    n = lengths.pop()
+    arrays, n = field_arrays(fields, action="pack", max_ndim=2)
     specs, layout, offset = [], [], 0
     for name, values in arrays.items():
         native = values.dtype.newbyteorder("=")
@@ -228,7 +213,5 @@ def pack_pointcloud2(
         specs.append(PointFieldSpec(name, offset, _DATATYPE_OF[native], count))
         layout.append((name, native.newbyteorder("<"), (count,) if values.ndim == 2 else ()))
         offset += native.itemsize * count
-    table = np.empty(n, dtype=np.dtype(layout))
-    for name, values in arrays.items():
-        table[name] = values
+    table = fill_table(arrays, layout, n)
     return specs, table.dtype.itemsize, table.view(np.uint8).reshape(-1)

@@ -10,8 +10,8 @@ An LZF stream is a sequence of runs, each introduced by one control byte ``c``:
 
 The longest back reference is 7 + 255 + 2 = 264 bytes and the farthest reaches 8192 bytes back.
 
-The public wrappers are :func:`nbcalib.io.pointcloud.lzf_decompress` and
-:func:`nbcalib.io.pointcloud.lzf_compress`; the slow, readable references are in
+The public wrappers are :func:`nbcalib.io.pcd.lzf_decompress` and
+:func:`nbcalib.io.pcd.lzf_compress`; the slow, readable references are in
 :mod:`nbcalib.reference.lzf`, and the compressor here emits exactly the reference's stream.
 """
 

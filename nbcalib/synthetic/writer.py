@@ -81,7 +81,7 @@ def _moving(sequence: SyntheticSequence) -> bool:
 def write_sequence_files(sequence: SyntheticSequence, out_dir, name: str) -> dict:
     """Write one pair as a PNG and PCD files; returns the written names (relative to out_dir)."""
     from nbcalib.io.image import write_png
-    from nbcalib.io.pointcloud import write_pcd
+    from nbcalib.io.pcd import write_pcd
 
     out_dir = Path(out_dir)
     write_png(out_dir / f"{name}.png", sequence.image)
@@ -116,7 +116,7 @@ def write_sequence_bag(sequence: SyntheticSequence, path, fmt: str, *, stamp_ns:
     stamp_ns : int
         Stamp of the image and of the first scan, nanoseconds.
     """
-    from nbcalib.io.bag import BagWriter
+    from nbcalib.io.bag_writer import BagWriter
 
     lidar, camera = FRAMES["lidar"], FRAMES["camera"]
     with BagWriter(path, fmt) as bag:
