@@ -450,7 +450,7 @@ def _nearest_pixels_reference(cam, T, pts):
 def test_nearest_pixels_matches_project_point(name, rng):
     """The vectorised block projection gives the pixels and validity of project_point, also on
     pixel borders, behind the camera, beyond the distortion fold and for non-finite points."""
-    from nbcalib.kernels.projection import nearest_pixels
+    from nbcalib.kernels.projection_batch import nearest_pixels
     from nbcalib.transforms import se3_exp
 
     cam = make(name)
@@ -479,7 +479,7 @@ def test_nearest_pixels_matches_project_point(name, rng):
 
 
 def test_nearest_pixels_beyond_fold_and_cap():
-    from nbcalib.kernels.projection import nearest_pixels
+    from nbcalib.kernels.projection_batch import nearest_pixels
 
     barrel = create_camera("plumb_bob", [500, 500, 320, 240], [-0.4, 0.0, 0, 0, 0], 640, 480)
     r_fold = 1 / math.sqrt(3 * 0.4)
