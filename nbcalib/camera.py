@@ -20,7 +20,8 @@ Example
 >>> bearings = cam.unproject(uv)      # unit vectors along the same rays
 
 :class:`CameraModel` is the validating public wrapper of the kernels in
-:mod:`nbcalib.kernels.projection`; kernels elsewhere use ``camera.model_id`` and
+:mod:`nbcalib.kernels.projection`, :mod:`nbcalib.kernels.projection_batch` and
+:mod:`nbcalib.kernels.unprojection`; kernels elsewhere use ``camera.model_id`` and
 ``camera.params`` with ``project_point`` / ``unproject_pixel`` directly.
 """
 
@@ -34,6 +35,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from nbcalib.kernels import projection as _k
+from nbcalib.kernels import projection_batch as _kb
+from nbcalib.kernels import unprojection as _ku
 
 __all__ = [
     "CAMERA_MODELS",
@@ -169,7 +172,7 @@ class CameraModel:
 
     # ---------------------------------------------------------------- geometry
     def project(self, points_camera, *, in_image: bool = False) -> tuple[np.ndarray, np.ndarray]:
-        """Project camera-frame points to pixels. Wraps ``kernels.projection._project``.
+        """Project camera-frame points to pixels. Wraps ``kernels.projection_batch._project``.
 
         Parameters
         ----------
@@ -186,7 +189,7 @@ class CameraModel:
             False for points behind the camera, outside the model's domain or non-finite.
         """
         pts, single = _as_points(points_camera)
-        uv, valid = _k._project(self.model_id, self.params, pts)
+        uv, valid = _kb._project(self.model_id, self.params, pts)
         if in_image:
             valid &= self.in_image(uv)
         return (uv[0], valid[0]) if single else (uv, valid)
@@ -202,11 +205,11 @@ class CameraModel:
         valid : ndarray of shape (N,), bool
         """
         pts, single = _as_points(points_camera)
-        uv, jac, valid = _k._project_jacobian(self.model_id, self.params, pts)
+        uv, jac, valid = _kb._project_jacobian(self.model_id, self.params, pts)
         return (uv[0], jac[0], valid[0]) if single else (uv, jac, valid)
 
     def unproject(self, uv) -> np.ndarray:
-        """Unit bearing vectors of pixel positions. Wraps ``kernels.projection._unproject``.
+        """Unit bearing vectors of pixel positions. Wraps ``kernels.unprojection._unproject``.
 
         Parameters
         ----------
@@ -223,7 +226,7 @@ class CameraModel:
         arr = np.ascontiguousarray(arr.reshape(1, -1) if single else arr)
         if arr.ndim != 2 or arr.shape[1] != 2:
             raise ValueError(f"uv must have shape (N, 2), got {np.shape(uv)}")
-        bearings, _ = _k._unproject(self.model_id, self.params, arr)
+        bearings, _ = _ku._unproject(self.model_id, self.params, arr)
         return bearings[0] if single else bearings
 
     def in_image(self, uv) -> np.ndarray:

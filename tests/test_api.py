@@ -50,7 +50,6 @@ def test_calibrate_from_arrays_recovers_the_truth(result):
 
 
 def test_calibrate_reports_quality_figures(result):
-    pytest.importorskip("nbcalib.report")
     assert result.quality.verdict in ("ok", "suspect")
 
 

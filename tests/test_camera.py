@@ -235,15 +235,16 @@ def test_non_finite_points_are_invalid(name):
 def test_fisheye_never_folds_points_from_behind():
     """The reference uses |z|: a point behind would land where its mirror image does."""
     cam = make("fisheye")
-    front = np.array([[0.3, 0.2, 1.0]])
-    back = front * [1, 1, -1]
-    (uv_f,), (ok_f,) = cam.project(front)
-    (uv_b,), (ok_b,) = cam.project(back)
-    assert ok_f
-    if ok_b:  # behind but inside the lens' monotonic domain: it must land further out
-        assert np.linalg.norm(uv_b - cam.intrinsics[2:4]) > np.linalg.norm(
-            uv_f - cam.intrinsics[2:4]
-        )
+    centre = cam.intrinsics[2:4]
+    # 105 degrees off the axis, behind but inside the lens' domain (122.7 degrees): it must land
+    # further out than its mirror image in front (75 degrees)
+    (uv_f,), (ok_f,) = cam.project([[1.0, 0.5, 0.3]])
+    (uv_b,), (ok_b,) = cam.project([[1.0, 0.5, -0.3]])
+    assert ok_f and ok_b
+    assert np.linalg.norm(uv_b - centre) > np.linalg.norm(uv_f - centre) + 100.0
+    # 160 degrees off the axis, beyond the domain: invalid, not folded onto its mirror image
+    assert cam.project([[0.3, 0.2, 1.0]])[1][0]
+    assert not cam.project([[0.3, 0.2, -1.0]])[1][0]
     assert not cam.project([0.0, 0.0, -1.0])[1]
     # a theta limit: beyond where theta_d stops growing, points are invalid
     narrow = create_camera("fisheye", [300, 300, 320, 240], [-0.3, 0.02, 0, 0], 640, 480)
@@ -450,7 +451,7 @@ def _nearest_pixels_reference(cam, T, pts):
 def test_nearest_pixels_matches_project_point(name, rng):
     """The vectorised block projection gives the pixels and validity of project_point, also on
     pixel borders, behind the camera, beyond the distortion fold and for non-finite points."""
-    from nbcalib.kernels.projection import nearest_pixels
+    from nbcalib.kernels.projection_batch import nearest_pixels
     from nbcalib.transforms import se3_exp
 
     cam = make(name)
@@ -479,7 +480,7 @@ def test_nearest_pixels_matches_project_point(name, rng):
 
 
 def test_nearest_pixels_beyond_fold_and_cap():
-    from nbcalib.kernels.projection import nearest_pixels
+    from nbcalib.kernels.projection_batch import nearest_pixels
 
     barrel = create_camera("plumb_bob", [500, 500, 320, 240], [-0.4, 0.0, 0, 0, 0], 640, 480)
     r_fold = 1 / math.sqrt(3 * 0.4)

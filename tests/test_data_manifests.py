@@ -54,24 +54,45 @@ def test_shipped_manifest_passes_the_schema(path):
     assert manifest.files and all(not f.path.startswith("/") for f in manifest.files)
 
 
-@pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.stem)
-def test_shipped_camera_builds_and_extrinsic_is_a_pose(path):
+def _shipped_with(predicate):
+    return [path for path in SHIPPED if predicate(load_manifest(path).data)]
+
+
+#: manifests whose camera states its image size (the others leave it to the images)
+SIZED_CAMERAS = _shipped_with(lambda d: (d["camera"] or {}).get("width") is not None)
+#: manifests that ship a reference extrinsic
+EXTRINSICS = _shipped_with(lambda d: d["reference_extrinsic"] is not None)
+
+
+def test_the_expected_manifests_state_a_camera_and_an_extrinsic():
+    """The two checks below run on these manifests at least (never on an empty list)."""
+    sized = {"kitti_raw_2011_09_26", "opencalib_auto_calib", "opencalib_manual_calib"}
+    assert {path.stem for path in SIZED_CAMERAS} >= sized
+    assert {path.stem for path in EXTRINSICS} >= sized | {"dvlc_livox"}
+
+
+@pytest.mark.parametrize("path", SIZED_CAMERAS, ids=lambda p: p.stem)
+def test_shipped_camera_builds(path):
     from nbcalib.camera import create_camera
 
-    data = load_manifest(path).data
-    camera = data["camera"]
-    if camera is not None and camera["width"] is not None:
-        create_camera(
-            camera["camera_model"],
-            camera["intrinsics"],
-            camera["distortion_coeffs"],
-            camera["width"],
-            camera["height"],
-        )
-    extrinsic = data["reference_extrinsic"]
-    if extrinsic is not None:
-        T = pose_from_xyz_quat(extrinsic["T_lidar_camera"])
-        assert np.linalg.norm(T[:3, 3]) < 2.0  # a rig, metres
+    camera = load_manifest(path).data["camera"]
+    cam = create_camera(
+        camera["camera_model"],
+        camera["intrinsics"],
+        camera["distortion_coeffs"],
+        camera["width"],
+        camera["height"],
+    )
+    assert (cam.width, cam.height) == (camera["width"], camera["height"])
+    uv, valid = cam.project([0.0, 0.0, 1.0])  # the optical axis meets the principal point
+    assert valid and cam.in_image(uv)
+    assert_allclose(uv, camera["intrinsics"][2:4], rtol=0, atol=1e-9)
+
+
+@pytest.mark.parametrize("path", EXTRINSICS, ids=lambda p: p.stem)
+def test_shipped_extrinsic_is_a_pose(path):
+    T = pose_from_xyz_quat(load_manifest(path).data["reference_extrinsic"]["T_lidar_camera"])
+    assert 0.0 < np.linalg.norm(T[:3, 3]) < 2.0  # a rig, metres
 
 
 @pytest.mark.parametrize("path", SHIPPED, ids=lambda p: p.stem)
@@ -203,8 +224,19 @@ def _mutations():
     ]
 
 
-def test_tiny_manifest_is_valid():
-    validate_manifest(_tiny_manifest())
+def test_tiny_manifest_is_valid(tmp_path):
+    data = _tiny_manifest()
+    assert validate_manifest(copy.deepcopy(data), path="tiny_set.yaml") is None
+    path = tmp_path / "tiny_set.yaml"
+    path.write_text(yaml.safe_dump(data))
+    manifest = load_manifest(path)
+    assert manifest.name == "tiny_set" and manifest.data == data
+    assert [(f.path, f.optional) for f in manifest.files] == [
+        ("scan.bin", False),
+        ("sub/image.png", False),
+        ("archive.tar.gz", False),
+        ("extra.txt", True),
+    ]
 
 
 @pytest.mark.parametrize(("mutate", "message"), _mutations(), ids=[m for _, m in _mutations()])

@@ -333,7 +333,13 @@ def test_read_ground_truth_is_an_input_error_api(tmp_path):
 
 def test_real_data_ground_truth_files(real_data):
     # the normalised real-data calibrations: T_cam_lidar 4x4 printed to ~6 digits
-    for path in sorted(real_data.glob("**/calib_normalized*.json")):
+    paths = sorted(real_data.glob("**/calib_normalized*.json"))
+    assert {p.relative_to(real_data).as_posix() for p in paths} >= {
+        "kitti_raw_2011_09_26/calib/calib_normalized_cam2rect.json",
+        "pjlab/auto_calib/calib_normalized.json",
+        "pjlab/manual_calib_0/calib_normalized.json",
+    }
+    for path in paths:
         T = read_ground_truth(path)
         raw = np.array(json.loads(path.read_text())["T_cam_lidar"])
         np.testing.assert_allclose(T, raw, rtol=0, atol=1e-5)

@@ -96,6 +96,7 @@ def test_zbuffer_kernel_equals_reference(name, rng):
             camera.model_id, camera.params, T, points, camera.width, camera.height
         )
         got = _kernel(camera, T, points)
+        assert len(got) == len(expected) == 4
         for e, g in zip(expected, got):
             assert e.dtype == g.dtype
             assert np.array_equal(e, g)

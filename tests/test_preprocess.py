@@ -192,7 +192,8 @@ def test_empty_and_nan_clouds(tmp_path, capsys, plain_files):
         )
         assert main(["preprocess", str(path), str(image), str(tmp_path / "w"), *CAMERA]) == 2
         err = capsys.readouterr().err
-        assert "no finite point" in err or "empty" in err or name in err, err
+        assert err == "nbcalib preprocess: error: scan 0 of pair '000000' holds no finite point\n"
+        assert not (tmp_path / "w" / "calib.json").exists()
 
 
 def test_real_kitti_scan(real_data, tmp_path):

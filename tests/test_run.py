@@ -234,7 +234,9 @@ def test_stages_name_the_stage_to_run_first_after_preprocess(finished, tmp_path,
     calib = read_calib_json(work / "calib.json")
     calib.results.clear()
     (work / "calib.json").write_text(json.dumps(calib.to_dict()))
-    for path in work.glob("*_matches.json"):
+    matches = list(work.glob("*_matches.json"))
+    assert matches  # the finished run wrote them: removing them is what this test is about
+    for path in matches:
         path.unlink()
     assert main(["initial-guess", str(work)]) == 2
     assert "run 'nbcalib find-matches' first" in capsys.readouterr().err

@@ -24,8 +24,8 @@ import numpy as np
 
 from nbcalib.kernels._jit import jit
 
-# The same constants as nbcalib.transforms (a test checks it): below _SINC_TAYLOR, sin(x)/x is
-# its Taylor series; below _JACOBIAN_TAYLOR, the SO(3) Jacobian coefficients are.
+# The same constants as nbcalib.transforms.so3 (a test checks it): below _SINC_TAYLOR, sin(x)/x
+# is its Taylor series; below _JACOBIAN_TAYLOR, the SO(3) Jacobian coefficients are.
 _SINC_TAYLOR = 1e-4
 _JACOBIAN_TAYLOR = 1e-2
 

@@ -30,7 +30,8 @@ import numpy as np
 from numba import prange
 
 from nbcalib.kernels._jit import jit, jit_inline, jit_parallel
-from nbcalib.kernels.projection import nearest_pixels, project_point, project_point_jacobian
+from nbcalib.kernels.projection import project_point, project_point_jacobian
+from nbcalib.kernels.projection_batch import nearest_pixels
 
 #: Chunks per call: enough to keep 2-8 threads busy; fixed so results do not depend on threads.
 N_CHUNKS = 16
@@ -51,12 +52,12 @@ def _joint_hist_hard_impl(model_id, params, T, xyz, point_bins, image_ext, width
 
     ``image_ext`` is the row-major image of bins followed by one sentinel pixel of value
     ``bins`` (see :func:`padded_image_bins`). Each chunk handles its points ``BLOCK`` at a time:
-    the vectorised :func:`~nbcalib.kernels.projection.nearest_pixels` writes their pixels into a
-    buffer that stays in the L1 cache, the points that miss the image pointing at the sentinel;
-    then one branch-free loop counts each point in cell ``(a, image_ext[pixel])`` of a
+    the vectorised :func:`~nbcalib.kernels.projection_batch.nearest_pixels` writes their pixels
+    into a buffer that stays in the L1 cache, the points that miss the image pointing at the
+    sentinel; then one branch-free loop counts each point in cell ``(a, image_ext[pixel])`` of a
     ``bins x (bins + 1)`` histogram, whose last column (the misses) is dropped at the end. The
-    counts go to four interleaved private histograms, so that consecutive points in one cell
-    do not wait for each other's increment. Measured on 1 M points against 1920 x 1080 (serial,
+    counts go to four interleaved private histograms, so that consecutive points in one cell do
+    not wait for each other's increment. Measured on 1 M points against 1920 x 1080 (serial,
     benchmarks/bench_nid.py): 11 ms for a scalar projection loop, 4.3 ms with the vectorised
     one and a branching count loop, 3.1 ms like this.
 

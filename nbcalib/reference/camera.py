@@ -1,8 +1,9 @@
 """Slow, readable camera models: the formulas written out once more, independently of the kernels.
 
-The tests compare :mod:`nbcalib.kernels.projection` with these functions; the notebooks teach from
-them. Everything is plain NumPy over arrays of points; unprojection is a generic numerical inverse
-(:func:`unproject`) that knows nothing about the models' closed forms.
+The tests compare :mod:`nbcalib.kernels.projection` and :mod:`nbcalib.kernels.unprojection` with
+these functions; the notebooks teach from them. Everything is plain NumPy over arrays of points;
+unprojection is a generic numerical inverse (:func:`unproject`) that knows nothing about the
+models' closed forms.
 """
 
 from __future__ import annotations
