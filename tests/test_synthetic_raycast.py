@@ -9,7 +9,9 @@ from tolerances import TOL
 
 from nbcalib.kernels import raycast as rc
 from nbcalib.reference.raycast import cast_rays as cast_rays_reference
-from nbcalib.synthetic.scene import SceneBuilder, build_bvh, make_scene, primitive_bounds
+from nbcalib.synthetic.builder import SceneBuilder
+from nbcalib.synthetic.bvh import build_bvh, primitive_bounds
+from nbcalib.synthetic.scene import make_scene
 from nbcalib.synthetic.texture import LUMA, Material, surface_properties
 from nbcalib.transforms import random_rotation
 

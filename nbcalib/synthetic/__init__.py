@@ -19,6 +19,7 @@ Example
 >>> seq.T_camera_lidar          # the answer a calibration should find
 """
 
+from nbcalib.synthetic.builder import SceneBuilder
 from nbcalib.synthetic.lidar import (
     LIDAR_PRESETS,
     LidarConfig,
@@ -38,7 +39,7 @@ from nbcalib.synthetic.rig import (
     default_T_camera_lidar,
     generate_sequence,
 )
-from nbcalib.synthetic.scene import Scene, SceneBuilder, SceneConfig, make_scene
+from nbcalib.synthetic.scene import Scene, SceneConfig, make_scene
 from nbcalib.synthetic.texture import Material
 
 __all__ = [
