@@ -17,9 +17,10 @@ import math
 import numpy as np
 
 from nbcalib.kernels import raycast as _rc
+from nbcalib.kernels.synthetic_texture import MAT_SIZE
 from nbcalib.synthetic.bvh import build_bvh
 from nbcalib.synthetic.scene import Lighting, Scene
-from nbcalib.synthetic.texture import MAT_SIZE, Material
+from nbcalib.synthetic.texture import Material
 
 __all__ = [
     "Placer",
