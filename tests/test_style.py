@@ -37,6 +37,17 @@ def test_numba_options_only_in_jit_module():
     assert not offenders, offenders
 
 
+def test_kernels_live_under_kernels():
+    """Every numba kernel is in nbcalib/kernels/: nothing else imports the JIT helpers or prange."""
+    pattern = re.compile(r"nbcalib\.kernels\._jit import|from numba import[^\n]*\bprange\b")
+    offenders = [
+        str(p.relative_to(ROOT))
+        for p in (ROOT / "nbcalib").rglob("*.py")
+        if "kernels" not in p.relative_to(ROOT).parts and pattern.search(p.read_text())
+    ]
+    assert not offenders, offenders
+
+
 def test_import_is_cheap_and_compiles_nothing():
     """`import nbcalib` loads neither numba nor any heavy optional dependency."""
     code = (

@@ -8,9 +8,12 @@ from numpy.testing import assert_allclose, assert_array_equal
 from tolerances import TOL
 
 from nbcalib.kernels import raycast as rc
+from nbcalib.kernels.synthetic_texture import LUMA
 from nbcalib.reference.raycast import cast_rays as cast_rays_reference
-from nbcalib.synthetic.scene import SceneBuilder, build_bvh, make_scene, primitive_bounds
-from nbcalib.synthetic.texture import LUMA, Material, surface_properties
+from nbcalib.synthetic.builder import SceneBuilder
+from nbcalib.synthetic.bvh import build_bvh, primitive_bounds
+from nbcalib.synthetic.scene import make_scene
+from nbcalib.synthetic.texture import Material, surface_properties
 from nbcalib.transforms import random_rotation
 
 

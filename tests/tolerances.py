@@ -30,6 +30,10 @@ TOL = {
     # ray caster kernel vs reference: the reference intersects a box as six rectangles (the
     # kernel uses slabs) and surface coordinates grow with the distance (up to ~100 m here)
     "raycast_vs_reference": dict(rtol=1e-9, atol=1e-9),
+    # synthetic shading and LiDAR kernels vs their references: the references cast with the
+    # reference ray caster, so they inherit its differences (above) in the distances, normals and
+    # surface coordinates, through the texture footprints, shadow-ray origins and ranges
+    "synthetic_vs_reference": dict(rtol=1e-9, atol=1e-9),
     # Kabsch rotation of two exactly consistent bearing pairs: one 3 x 3 SVD, ~1e-15
     "kabsch_rotation": dict(rtol=0.0, atol=1e-12),
     # noise-free 2D-3D correspondences: LM converges to the true pose up to its step tolerance

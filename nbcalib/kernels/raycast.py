@@ -33,7 +33,7 @@ metres, the input of the procedural textures:
 
 Semantics shared with the slow reference :func:`nbcalib.reference.raycast.cast_rays`: a hit needs
 ``t_min < t < t_max``; the nearest hit wins, and on an exact tie the lower primitive index wins.
-The kernels walk a bounding volume hierarchy (built by :func:`nbcalib.synthetic.scene.build_bvh`);
+The kernels walk a bounding volume hierarchy (built by :func:`nbcalib.synthetic.bvh.build_bvh`);
 the reference tests every primitive, so comparing the two also tests the hierarchy.
 """
 

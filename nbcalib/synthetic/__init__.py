@@ -2,8 +2,10 @@
 
 Pieces, each usable alone:
 
-- :mod:`~nbcalib.synthetic.scene`: procedural rooms and streets of analytic primitives, ray cast
-  by :mod:`nbcalib.kernels.raycast`;
+- :mod:`~nbcalib.synthetic.scene`: scenes of analytic primitives (:class:`Scene`), ray cast by
+  :mod:`nbcalib.kernels.raycast` over a hierarchy from :mod:`~nbcalib.synthetic.bvh`;
+  :func:`make_scene` generates the procedural rooms and streets of
+  :mod:`~nbcalib.synthetic.scenes` with :mod:`~nbcalib.synthetic.builder`;
 - :mod:`~nbcalib.synthetic.texture`: materials whose camera albedo and LiDAR reflectivity are
   correlated but not equal (the cross-modal gap);
 - :mod:`~nbcalib.synthetic.lidar`: spinning and rosette LiDARs with noise and motion distortion;
@@ -12,6 +14,10 @@ Pieces, each usable alone:
 - :mod:`~nbcalib.synthetic.rig`: all of it together, one pair at a time;
 - :mod:`~nbcalib.synthetic.writer`: files and bags as users have them (``nbcalib synth``).
 
+The numba kernels are in :mod:`nbcalib.kernels` (``raycast``, ``synthetic_texture``,
+``synthetic_shading``, ``synthetic_lidar``), their slow references in :mod:`nbcalib.reference`;
+the modules here hold the configurations and the validating wrappers.
+
 Example
 -------
 >>> from nbcalib.synthetic import RigConfig, generate_sequence
@@ -19,6 +25,7 @@ Example
 >>> seq.T_camera_lidar          # the answer a calibration should find
 """
 
+from nbcalib.synthetic.builder import SceneBuilder
 from nbcalib.synthetic.lidar import (
     LIDAR_PRESETS,
     LidarConfig,
@@ -38,7 +45,7 @@ from nbcalib.synthetic.rig import (
     default_T_camera_lidar,
     generate_sequence,
 )
-from nbcalib.synthetic.scene import Scene, SceneBuilder, SceneConfig, make_scene
+from nbcalib.synthetic.scene import Scene, SceneConfig, make_scene
 from nbcalib.synthetic.texture import Material
 
 __all__ = [

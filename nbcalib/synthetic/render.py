@@ -14,17 +14,14 @@ to sRGB-like gamma, given shot and read noise, and quantised to 8 bits: grey (lu
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import prange
 
 from nbcalib.camera import CameraModel
-from nbcalib.kernels._jit import jit, jit_parallel
-from nbcalib.kernels.raycast import _BATCH, _any_hit, _closest_hit, _hit_attributes, _new_stack
+from nbcalib.kernels import synthetic_shading as _sh
+from nbcalib.kernels.synthetic_texture import LUMA
 from nbcalib.synthetic.scene import Scene
-from nbcalib.synthetic.texture import LUMA, _material_at
 
 __all__ = ["RenderConfig", "RenderedImage", "radiance", "render_image"]
 
@@ -98,107 +95,8 @@ def _pixel_angle(bearings) -> np.ndarray:
     return np.where(np.isfinite(angle), angle, fallback)
 
 
-def _shade_body(
-    prims,
-    bounds,
-    nodes,
-    order,
-    materials,
-    gap,
-    origin,
-    directions,
-    pixel_angle,
-    sun,
-    ambient,
-    lights,
-    sky_top,
-    sky_horizon,
-    shadows,
-    out_radiance,
-    out_t,
-    out_prim,
-):
-    """Linear radiance of each pixel's ray: cast, texture, ambient + sun + point lights, shadows.
-
-    ``sun`` = (unit direction towards the sun, irradiance); ``lights`` (L, 4) = (x, y, z, power).
-    ``out_t`` gets the hit distance (``inf`` for the sky, NaN for an invalid ray).
-    """
-    n = directions.shape[0]
-    ox, oy, oz = origin[0], origin[1], origin[2]
-    for batch in prange((n + _BATCH - 1) // _BATCH):
-        stack = _new_stack()
-        for r in range(batch * _BATCH, min(n, (batch + 1) * _BATCH)):
-            dx, dy, dz = directions[r, 0], directions[r, 1], directions[r, 2]
-            out_radiance[r, 0] = 0.0
-            out_radiance[r, 1] = 0.0
-            out_radiance[r, 2] = 0.0
-            out_t[r] = np.nan
-            out_prim[r] = -1
-            if not np.isfinite(dx + dy + dz):
-                continue
-            t, i, face = _closest_hit(
-                prims, bounds, nodes, order, stack, ox, oy, oz, dx, dy, dz, 0.0, np.inf
-            )
-            if i < 0:
-                out_t[r] = np.inf
-                w = math.sqrt(min(1.0, max(0.0, dz)))
-                for c in range(3):
-                    out_radiance[r, c] = sky_horizon[c] + (sky_top[c] - sky_horizon[c]) * w
-                continue
-            out_t[r] = t
-            out_prim[r] = i
-            nx, ny, nz, s, u = _hit_attributes(prims, i, face, ox, oy, oz, dx, dy, dz, t)
-            cos_incidence = abs(nx * dx + ny * dy + nz * dz)
-            fw = t * pixel_angle[r] / max(cos_incidence, 0.15)
-            red, green, blue, _, _, _ = _material_at(
-                prims, materials, i, face, s, u, fw, gap, True, False
-            )
-            # shadow rays start a little off the surface, on the side the camera sees
-            px = ox + t * dx + 1e-4 * nx
-            py = oy + t * dy + 1e-4 * ny
-            pz = oz + t * dz + 1e-4 * nz
-            irradiance = ambient * (0.7 + 0.3 * nz)
-            facing = nx * sun[0] + ny * sun[1] + nz * sun[2]
-            if sun[3] > 0.0 and facing > 0.0:
-                if not shadows or not _any_hit(
-                    prims,
-                    bounds,
-                    nodes,
-                    order,
-                    stack,
-                    px,
-                    py,
-                    pz,
-                    sun[0],
-                    sun[1],
-                    sun[2],
-                    0.0,
-                    np.inf,
-                ):
-                    irradiance += sun[3] * facing
-            for k in range(lights.shape[0]):
-                lx, ly, lz = lights[k, 0] - px, lights[k, 1] - py, lights[k, 2] - pz
-                distance = math.sqrt(lx * lx + ly * ly + lz * lz)
-                lx, ly, lz = lx / distance, ly / distance, lz / distance
-                facing = nx * lx + ny * ly + nz * lz
-                if facing <= 0.0:
-                    continue
-                if shadows and _any_hit(
-                    prims, bounds, nodes, order, stack, px, py, pz, lx, ly, lz, 0.0, distance - 1e-3
-                ):
-                    continue
-                irradiance += lights[k, 3] * facing / max(distance, 0.3) ** 2
-            out_radiance[r, 0] = red * irradiance
-            out_radiance[r, 1] = green * irradiance
-            out_radiance[r, 2] = blue * irradiance
-
-
-_shade = jit(_shade_body)
-_shade_parallel = jit_parallel(_shade_body)
-
-
 def radiance(scene: Scene, origin, directions, pixel_angle, *, shadows=True, parallel=False):
-    """Linear RGB radiance along camera rays (wraps ``_shade``; no exposure, blur or noise).
+    """Linear RGB radiance along camera rays (wraps the shading kernel; no exposure, blur, noise).
 
     Parameters
     ----------
@@ -235,7 +133,7 @@ def radiance(scene: Scene, origin, directions, pixel_angle, *, shadows=True, par
     out_radiance = np.empty((n, 3))
     out_t = np.empty(n)
     out_prim = np.empty(n, dtype=np.int64)
-    kernel = _shade_parallel if parallel else _shade
+    kernel = _sh._shade_parallel if parallel else _sh._shade
     kernel(
         scene.prims,
         scene.bvh_bounds,

@@ -1,6 +1,7 @@
 """Materials and procedural textures: what the camera and the LiDAR see on a surface.
 
-A material is one row of a flat float64 table (columns ``MAT_*`` below). Both modalities share a
+A material is one row of a flat float64 table (columns ``MAT_*`` of
+:mod:`nbcalib.kernels.synthetic_texture`). Both modalities share a
 geometric *pattern* (bricks, tiles, lane markings, text-like glyphs, windows, ...) evaluated from
 the hit's surface coordinates ``(s, u)`` in metres: the pattern mask ``m`` in [0, 1] blends the
 material's colour/reflectivity ``A`` (background) into ``B`` (pattern), so edges line up in both
@@ -15,66 +16,36 @@ the camera's albedo texture and ``g = 1`` (default) the designed differences (ve
 the camera and bright in the LiDAR, glass bright in the camera and weak in the LiDAR, ...).
 Shading and shadows are the camera's alone (:mod:`nbcalib.synthetic.render`).
 
-Kernels are private and called through :func:`surface_properties`.
+The kernels (:mod:`nbcalib.kernels.synthetic_texture`, which lays out the table) are private
+and called through :func:`surface_properties`; their slow reference is
+:mod:`nbcalib.reference.synthetic_texture`.
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
-from numba import prange
 
-from nbcalib.kernels._jit import jit, jit_parallel
-from nbcalib.kernels.raycast import PRIM_MATERIAL
+from nbcalib.kernels import synthetic_texture as _tx
 
-# --- patterns -------------------------------------------------------------------------------
-PLAIN = 0  #: no pattern (m = 0)
-NOISE = 1  #: smooth blotches (fBm) between A and B: concrete, asphalt, plaster
-BRICKS = 2  #: running-bond bricks of ``scale`` height, mortar = B
-TILES = 3  #: square tiles of ``scale``, grout = B, tiles vary in tone
-ROAD = 4  #: lane markings on a road strip (``u`` across, ``s`` along); paint = B
-TEXT = 5  #: text-like glyph blocks of line height ``scale``; ink = B
-PLANKS = 6  #: planks of width ``scale`` along ``s`` with grain
-LEAVES = 7  #: foliage clusters of size ``scale``; B = lit leaves
-SIGN = 8  #: a sign face: border and a central symbol = B
-WINDOWS = 9  #: a facade grid of windows (pitch ``scale``), glass = B
-STRIPES = 10  #: stripes across ``s`` of period ``scale``, every other stripe = B
-CHECKER = 11  #: checkerboard of squares of ``scale``
+__all__ = ["PATTERNS", "Material", "surface_properties"]
 
+#: pattern names of :class:`Material` -> pattern ids of the kernels
 PATTERNS = {
-    "plain": PLAIN,
-    "noise": NOISE,
-    "bricks": BRICKS,
-    "tiles": TILES,
-    "road": ROAD,
-    "text": TEXT,
-    "planks": PLANKS,
-    "leaves": LEAVES,
-    "sign": SIGN,
-    "windows": WINDOWS,
-    "stripes": STRIPES,
-    "checker": CHECKER,
+    "plain": _tx.PLAIN,
+    "noise": _tx.NOISE,
+    "bricks": _tx.BRICKS,
+    "tiles": _tx.TILES,
+    "road": _tx.ROAD,
+    "text": _tx.TEXT,
+    "planks": _tx.PLANKS,
+    "leaves": _tx.LEAVES,
+    "sign": _tx.SIGN,
+    "windows": _tx.WINDOWS,
+    "stripes": _tx.STRIPES,
+    "checker": _tx.CHECKER,
 }
-
-# --- material table columns -----------------------------------------------------------------
-MAT_PATTERN = 0
-MAT_SCALE = 1
-MAT_COLOR_A = 2  # 3 columns, linear RGB albedo in [0, 1]
-MAT_COLOR_B = 5  # 3 columns
-MAT_REFL_A = 8
-MAT_REFL_B = 9
-MAT_CAMERA_NOISE = 10
-MAT_LIDAR_NOISE = 11
-MAT_NOISE_SCALE = 12
-MAT_SEED = 13
-MAT_DROPOUT = 14
-MAT_RETRO = 15
-MAT_SIZE = 16
-
-#: Rec. 709 luminance weights of linear RGB
-LUMA = (0.2126, 0.7152, 0.0722)
 
 
 @dataclass(frozen=True)
@@ -123,268 +94,26 @@ class Material:
             raise ValueError(f"unknown pattern {self.pattern!r}; expected one of {list(PATTERNS)}")
         if self.scale <= 0 or self.noise_scale <= 0:
             raise ValueError("pattern and noise scales must be positive")
-        row = np.zeros(MAT_SIZE)
-        row[MAT_PATTERN] = PATTERNS[self.pattern]
-        row[MAT_SCALE] = self.scale
-        row[MAT_COLOR_A : MAT_COLOR_A + 3] = self.color_a
-        row[MAT_COLOR_B : MAT_COLOR_B + 3] = self.color_b
-        row[MAT_REFL_A] = self.reflectivity_a
-        row[MAT_REFL_B] = self.reflectivity_b
-        row[MAT_CAMERA_NOISE] = self.camera_noise
-        row[MAT_LIDAR_NOISE] = self.lidar_noise
-        row[MAT_NOISE_SCALE] = self.noise_scale
-        row[MAT_SEED] = self.seed % 1_000_003
-        row[MAT_DROPOUT] = self.dropout
-        row[MAT_RETRO] = 1.0 if self.retro else 0.0
+        row = np.zeros(_tx.MAT_SIZE)
+        row[_tx.MAT_PATTERN] = PATTERNS[self.pattern]
+        row[_tx.MAT_SCALE] = self.scale
+        row[_tx.MAT_COLOR_A : _tx.MAT_COLOR_A + 3] = self.color_a
+        row[_tx.MAT_COLOR_B : _tx.MAT_COLOR_B + 3] = self.color_b
+        row[_tx.MAT_REFL_A] = self.reflectivity_a
+        row[_tx.MAT_REFL_B] = self.reflectivity_b
+        row[_tx.MAT_CAMERA_NOISE] = self.camera_noise
+        row[_tx.MAT_LIDAR_NOISE] = self.lidar_noise
+        row[_tx.MAT_NOISE_SCALE] = self.noise_scale
+        row[_tx.MAT_SEED] = self.seed % 1_000_003
+        row[_tx.MAT_DROPOUT] = self.dropout
+        row[_tx.MAT_RETRO] = 1.0 if self.retro else 0.0
         return row
-
-
-# --- noise ----------------------------------------------------------------------------------
-@jit
-def _hash(i, j, seed):
-    """Integer lattice hash to [0, 1) (a 32-bit mix; int64 arithmetic masked to 32 bits)."""
-    h = (i * 374761393 + j * 668265263 + seed * 1442695041) & 0xFFFFFFFF
-    h = ((h ^ (h >> 13)) * 1274126177) & 0xFFFFFFFF
-    h = h ^ (h >> 16)
-    return h / 4294967296.0
-
-
-@jit
-def _value_noise(x, y, seed):
-    """Smooth value noise in [0, 1) with unit lattice spacing."""
-    fx = math.floor(x)
-    fy = math.floor(y)
-    i = int(fx)
-    j = int(fy)
-    tx = x - fx
-    ty = y - fy
-    tx = tx * tx * (3.0 - 2.0 * tx)
-    ty = ty * ty * (3.0 - 2.0 * ty)
-    a = _hash(i, j, seed)
-    b = _hash(i + 1, j, seed)
-    c = _hash(i, j + 1, seed)
-    d = _hash(i + 1, j + 1, seed)
-    return (a + (b - a) * tx) + ((c + (d - c) * tx) - (a + (b - a) * tx)) * ty
-
-
-@jit
-def _fade(footprint, feature):
-    """How much a detail of size ``feature`` is averaged away by a ``footprint``: 0 to 1.
-
-    0 while the footprint is below half the feature, 1 above one and a half features, smooth in
-    between: details finer than a pixel (or a laser spot) fade to their mean instead of aliasing.
-    """
-    x = min(1.0, max(0.0, footprint / feature - 0.5))
-    return x * x * (3.0 - 2.0 * x)
-
-
-@jit
-def _fbm(x, y, seed, footprint):
-    """Four octaves of value noise in [0, 1); octaves finer than ``footprint`` fade to 0.5."""
-    total = 0.0
-    amplitude = 0.5
-    frequency = 1.0
-    norm = 0.0
-    for octave in range(4):
-        fade = _fade(footprint, 1.0 / frequency)
-        value = _value_noise(x * frequency, y * frequency, seed + 101 * octave)
-        total += amplitude * (value + (0.5 - value) * fade)
-        norm += amplitude
-        amplitude *= 0.5
-        frequency *= 2.0
-    return total / norm
-
-
-@jit
-def _line(x, width):
-    """1 within ``width / 2`` of the nearest integer of ``x``, else 0 (a periodic thin line)."""
-    return 1.0 if abs(x - math.floor(x + 0.5)) < 0.5 * width else 0.0
-
-
-@jit
-def _filtered(m, mean, footprint, feature):
-    """Blend a pattern value towards its mean as the footprint outgrows the feature."""
-    return m + (mean - m) * _fade(footprint, feature)
-
-
-# --- patterns -------------------------------------------------------------------------------
-@jit
-def _pattern(kind, s, u, scale, seed, fw):
-    """Pattern mask ``m`` in [0, 1] and a per-element tone variation ``v`` in about [-0.2, 0.2].
-
-    ``(s, u)`` are surface coordinates and ``fw`` the footprint of the pixel or laser spot,
-    metres; details smaller than the footprint fade to their mean (:func:`_fade`).
-    """
-    if kind == NOISE:
-        return _fbm(s / scale, u / scale, seed, fw / scale), 0.0
-    if kind == BRICKS:
-        row = math.floor(u / scale)
-        x = s / (2.0 * scale) + 0.5 * (row % 2)
-        mortar = max(_line(u / scale, 0.12), _line(x, 0.06))
-        v = 0.35 * (_hash(math.floor(x), int(row), seed) - 0.5)
-        return _filtered(mortar, 0.17, fw, 0.12 * scale), _filtered(v, 0.0, fw, scale)
-    if kind == TILES:
-        grout = max(_line(s / scale, 0.04), _line(u / scale, 0.04))
-        i = math.floor(s / scale)
-        j = math.floor(u / scale)
-        v = 0.25 * (_hash(i, j, seed) - 0.5) + (0.08 if (i + j) % 2 == 0 else -0.08)
-        return _filtered(grout, 0.08, fw, 0.04 * scale), _filtered(v, 0.0, fw, 0.5 * scale)
-    if kind == ROAD:
-        # u across the road (0..width), s along it; scale = road width
-        width = scale
-        edge = 1.0 if (0.25 < u < 0.40) or (width - 0.40 < u < width - 0.25) else 0.0
-        centre = 1.0 if abs(u - 0.5 * width) < 0.07 and (s % 9.0) < 3.0 else 0.0
-        crossing = (s % 60.0) > 50.0 and (s % 60.0) < 54.0 and (u % 1.0) < 0.5
-        crossing_m = 1.0 if crossing and 0.6 < u < width - 0.6 else 0.0
-        arrow = (s % 60.0) > 40.0 and (s % 60.0) < 43.0 and abs(u - 0.25 * width) < 0.15
-        m = max(max(edge, centre), max(crossing_m, 1.0 if arrow else 0.0))
-        return _filtered(m, 0.05, fw, 0.6), 0.0
-    if kind == TEXT:
-        line = math.floor(u / scale)
-        in_line = (u / scale - line) < 0.7
-        # words: runs of glyphs separated by gaps; glyphs are 3 x 5 blocks of 'ink' bits
-        glyph = math.floor(s / (0.6 * scale))
-        gx = s / (0.6 * scale) - glyph
-        gy = (u / scale - line) / 0.7
-        word = _hash(int(glyph) // 6, int(line), seed + 7) > 0.25
-        paragraph = _hash(int(line) // 4, 0, seed + 11) > 0.2
-        if not (in_line and word and paragraph) or gx > 0.8 or int(glyph) % 6 == 5:
-            return _filtered(0.0, 0.22, fw, 0.2 * scale), 0.0
-        bit_i = int(gx / 0.8 * 3.0)
-        bit_j = int(gy * 5.0)
-        ink = _hash(int(glyph) * 16 + bit_i, int(line) * 8 + bit_j, seed) > 0.45
-        return _filtered(1.0 if ink else 0.0, 0.22, fw, 0.2 * scale), 0.0
-    if kind == PLANKS:
-        plank = math.floor(u / scale)
-        grain = _value_noise(s * 0.7, u / scale * 6.0, seed + int(plank)) - 0.5
-        grain = _filtered(grain, 0.0, fw, scale / 6.0)
-        gap = _line(u / scale, 0.03)
-        v = 0.3 * (_hash(int(plank), 0, seed) - 0.5) + 0.2 * grain
-        return _filtered(gap, 0.03, fw, 0.03 * scale), _filtered(v, 0.0, fw, scale)
-    if kind == LEAVES:
-        n = _fbm(s / scale, u / scale, seed, fw / scale)
-        fine = _filtered(
-            _value_noise(s / scale * 6.0, u / scale * 6.0, seed + 3), 0.5, fw, scale / 6.0
-        )
-        m = 1.0 if n + 0.3 * fine > 0.62 else 0.0
-        return _filtered(m, 0.35, fw, 0.3 * scale), 0.3 * (fine - 0.5)
-    if kind == SIGN:
-        # scale = the sign's full width; (s, u) from its corner
-        cx = s / scale - 0.5
-        cy = u / scale - 0.5
-        r = max(abs(cx), abs(cy))
-        border = 0.40 < r < 0.46
-        symbol = (abs(cx) < 0.08 and abs(cy) < 0.28) or (abs(cy - 0.15) < 0.07 and abs(cx) < 0.25)
-        m = 1.0 if border or symbol else 0.0
-        return _filtered(m, 0.25, fw, 0.06 * scale), 0.0
-    if kind == WINDOWS:
-        wx = s / scale - math.floor(s / scale)
-        wy = u / (1.2 * scale) - math.floor(u / (1.2 * scale))
-        glass = 0.2 < wx < 0.8 and 0.3 < wy < 0.85 and u > 0.8 * scale
-        mullion = abs(wx - 0.5) < 0.02 and fw < 0.04 * scale
-        j = math.floor(u / (1.2 * scale))
-        lit = _hash(math.floor(s / scale), j, seed) - 0.5
-        m = 1.0 if glass and not mullion else 0.0
-        return _filtered(m, 0.3, fw, 0.3 * scale), 0.3 * lit
-    if kind == STRIPES:
-        m = 1.0 if (s / scale - math.floor(s / scale)) < 0.5 else 0.0
-        return _filtered(m, 0.5, fw, 0.5 * scale), 0.0
-    if kind == CHECKER:
-        i = math.floor(s / scale)
-        j = math.floor(u / scale)
-        return _filtered(1.0 if (i + j) % 2 == 0 else 0.0, 0.5, fw, scale), 0.0
-    return 0.0, 0.0
-
-
-@jit
-def _clip01(x):
-    return min(1.0, max(0.0, x))
-
-
-@jit
-def _material_at(prims, materials, i, face, s, u, fw, gap, need_camera, need_lidar):
-    """What both sensors see where a ray hit primitive ``i``.
-
-    Returns ``(red, green, blue, reflectivity, dropout, retro)``: the linear albedo in [0, 1],
-    the LiDAR reflectivity (above 1 only on retro-reflectors), the extra probability of a lost
-    return, and whether the spot is retro-reflective. ``(s, u)`` and the footprint ``fw`` are in
-    metres, ``gap`` is the modality gap. A modality not needed (``need_camera`` /
-    ``need_lidar`` False) is skipped and returned as NaN, except that the LiDAR needs the
-    camera's albedo when ``gap < 1``.
-    """
-    row = materials[int(prims[i, PRIM_MATERIAL])]
-    seed = int(row[MAT_SEED]) + 7919 * i + 131 * face
-    kind = int(row[MAT_PATTERN])
-    m, v = _pattern(kind, s, u, row[MAT_SCALE], seed, fw)
-    ns = row[MAT_NOISE_SCALE]
-    red = green = blue = reflectivity = np.nan
-    luminance = 0.0
-    if need_camera or (need_lidar and gap < 1.0):
-        noise = _fbm(s / ns, u / ns, seed + 17, fw / ns)
-        shade = (1.0 + v) * (1.0 + row[MAT_CAMERA_NOISE] * (2.0 * noise - 1.0))
-        a = MAT_COLOR_A
-        b = MAT_COLOR_B
-        red = _clip01((row[a] + (row[b] - row[a]) * m) * shade)
-        green = _clip01((row[a + 1] + (row[b + 1] - row[a + 1]) * m) * shade)
-        blue = _clip01((row[a + 2] + (row[b + 2] - row[a + 2]) * m) * shade)
-        luminance = LUMA[0] * red + LUMA[1] * green + LUMA[2] * blue
-    retro = False
-    dropout = 0.0
-    if need_lidar:
-        noise = _fbm(s / ns, u / ns, seed + 29, fw / ns)
-        lidar_tex = 1.0 + row[MAT_LIDAR_NOISE] * (2.0 * noise - 1.0)
-        ra = row[MAT_REFL_A]
-        designed = max(0.0, (ra + (row[MAT_REFL_B] - ra) * m) * (1.0 + 0.5 * v) * lidar_tex)
-        retro = row[MAT_RETRO] > 0.0 and designed > 1.0 and gap > 0.0
-        if not retro:
-            designed = min(designed, 1.0)
-        reflectivity = (1.0 - gap) * luminance + gap * designed
-        # windows drop returns on the glass only; other materials everywhere
-        dropout = gap * row[MAT_DROPOUT] * (m if kind == WINDOWS else 1.0)
-    return red, green, blue, reflectivity, dropout, retro
-
-
-def _surface_properties_body(
-    prims, materials, prim, face, surface, footprint, gap, albedo, reflectivity, dropout, retro
-):
-    for r in prange(prim.shape[0]):
-        i = prim[r]
-        if i < 0:
-            albedo[r, 0] = np.nan
-            albedo[r, 1] = np.nan
-            albedo[r, 2] = np.nan
-            reflectivity[r] = np.nan
-            dropout[r] = 0.0
-            retro[r] = False
-            continue
-        red, green, blue, refl, drop, is_retro = _material_at(
-            prims,
-            materials,
-            i,
-            face[r],
-            surface[r, 0],
-            surface[r, 1],
-            footprint[r],
-            gap,
-            True,
-            True,
-        )
-        albedo[r, 0] = red
-        albedo[r, 1] = green
-        albedo[r, 2] = blue
-        reflectivity[r] = refl
-        dropout[r] = drop
-        retro[r] = is_retro
-
-
-_surface_properties = jit(_surface_properties_body)
-_surface_properties_parallel = jit_parallel(_surface_properties_body)
 
 
 def surface_properties(
     prims, materials, prim, face, surface, *, footprint=None, gap=1.0, parallel=False
 ):
-    """Camera albedo and LiDAR reflectivity at ray hits (wraps ``_surface_properties``).
+    """Camera albedo and LiDAR reflectivity at ray hits (wraps the texture kernel).
 
     Parameters
     ----------
@@ -432,7 +161,7 @@ def surface_properties(
     reflectivity = np.empty(n)
     dropout = np.empty(n)
     retro = np.empty(n, dtype=np.bool_)
-    kernel = _surface_properties_parallel if parallel else _surface_properties
+    kernel = _tx._surface_properties_parallel if parallel else _tx._surface_properties
     kernel(
         np.ascontiguousarray(prims, dtype=np.float64),
         np.ascontiguousarray(materials, dtype=np.float64),
