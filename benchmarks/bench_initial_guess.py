@@ -181,7 +181,7 @@ def end_to_end_pair(
 ) -> dict:
     """Match views, estimate, score against ``truth``; one row of the table."""
     from nbcalib.errors import InputError
-    from nbcalib.initial_guess import match_views
+    from nbcalib.matching import match_views
 
     load = os.getloadavg()[0]
     wall, cpu = time.perf_counter(), time.process_time()

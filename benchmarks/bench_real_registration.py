@@ -14,8 +14,8 @@ refine` with the given :class:`RefineConfig`. Sets:
   (KITTI triggers the camera when the LiDAR faces forward: the middle of the scan);
 - ``pjlab``: each PJLab frame (two rigs, one scan each).
 
-Static clouds go through :func:`nbcalib.preprocess.pipeline.preprocess` into a temporary work
-directory and are loaded back (reader, camera, work directory: the real path); accumulated
+Static clouds go through :func:`nbcalib.preprocess.prepare.prepare_pair` (the readers and
+preprocessing of ``nbcalib preprocess``, the values its work directory holds); accumulated
 clouds are integrated in-process with the same settings, since re-expressing them needs the
 scan poses. Per set: final error against the reference (median / max over runs), success rate
 (both errors under the threshold printed), CPU and wall time per run, visible points, and how
@@ -41,7 +41,6 @@ import math
 import os
 import platform
 import sys
-import tempfile
 import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
@@ -52,10 +51,11 @@ from nbcalib.camera import CameraModel
 from nbcalib.io.calib_json import read_ground_truth
 from nbcalib.io.camera_file import load_camera
 from nbcalib.metrics import pose_errors
-from nbcalib.preprocess.pipeline import PreprocessConfig, gather_files, preprocess
+from nbcalib.preprocess.config import PreprocessConfig
+from nbcalib.preprocess.inputs import gather_files
+from nbcalib.preprocess.prepare import prepare_pair
 from nbcalib.registration.refine import RefineConfig, RegistrationPair, build_cost, refine
 from nbcalib.transforms import interpolate_pose, invert_T, make_T, se3_exp, so3_exp
-from nbcalib.workdir import WorkDir
 
 #: ../shared/data/real relative to the project root (as tests/conftest.py)
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
@@ -94,14 +94,11 @@ def kitti_paths(data: Path, k: int) -> tuple[Path, Path]:
 
 
 def static_pairs(inputs, camera: CameraModel, config: PreprocessConfig) -> list[RegistrationPair]:
-    """Preprocess ``inputs`` into a temporary work directory and load the pairs back."""
-    with tempfile.TemporaryDirectory(prefix="nbcalib_bench_") as tmp:
-        preprocess(inputs, tmp, camera=camera, config=config, log=lambda line: None)
-        work = WorkDir(tmp)
-        pairs = []
-        for name in work.names():
-            p = work.load_pair(name)
-            pairs.append(RegistrationPair(camera, p.image, p.points_lidar, p.intensities, name))
+    """Preprocess ``inputs`` as ``nbcalib preprocess`` does (the values its files hold)."""
+    pairs = []
+    for pair in inputs:
+        p = prepare_pair(pair, config)
+        pairs.append(RegistrationPair(camera, p.image, p.points_lidar, p.intensities, p.name))
     return pairs
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import logging
+import re
 import sys
 import traceback
 
@@ -76,15 +77,56 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+_NEGATIVE = re.compile(r"^-(\d|\.\d)")
+
+
+def join_negative_values(argv: list[str]) -> list[str]:
+    """``--init -0.1,0.2,...`` -> ``--init=-0.1,0.2,...``.
+
+    argparse takes a value that starts with ``-`` and is not a plain number for an option, so a
+    pasted pose or distortion vector starting with a minus would fail with "expected one
+    argument". No option of nbcalib takes a negative number as a positional argument.
+    """
+    out: list[str] = []
+    i = 0
+    while i < len(argv):
+        token = argv[i]
+        if (
+            token.startswith("--")
+            and "=" not in token
+            and i + 1 < len(argv)
+            and _NEGATIVE.match(argv[i + 1])
+        ):
+            out.append(f"{token}={argv[i + 1]}")
+            i += 2
+            continue
+        out.append(token)
+        i += 1
+    return out
+
+
+def _log_to_stderr(level: int) -> None:
+    """Stage progress (the ``nbcalib`` loggers) to this command's stderr, one line each."""
+    logger = logging.getLogger("nbcalib")
+    for handler in list(logger.handlers):
+        if getattr(handler, "nbcalib_cli", False):
+            logger.removeHandler(handler)
+    handler = logging.StreamHandler(sys.stderr)
+    handler.nbcalib_cli = True
+    handler.setFormatter(logging.Formatter("%(message)s"))
+    logger.addHandler(handler)
+    logger.setLevel(level)
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
     parser = build_parser()
-    args = parser.parse_args(argv)
+    args = parser.parse_args(join_negative_values(sys.argv[1:] if argv is None else list(argv)))
     if args.command is None:
         parser.print_help()
         return 2
     level = logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO
-    logging.basicConfig(level=level, format="%(message)s")
+    _log_to_stderr(level)
     try:
         status = args.run(args)
     except InputError as exc:

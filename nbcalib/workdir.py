@@ -1,4 +1,4 @@
-"""The work directory: one calibration job's files, shared with the reference toolbox.
+"""The work directory: the one place where a job's products are saved and loaded.
 
 Layout (the nbcalib CLI contract and the reference toolbox, section 1.1), one set of products per
 data name ``<name>`` (a bag's file or folder name, or ``000000`` for plain files)::
@@ -9,152 +9,69 @@ data name ``<name>`` (a bag's file or folder name, or ``000000`` for plain files
       <name>.ply                    dense cloud, binary little-endian float32 x, y, z, intensity
                                     (equalised, in [0, 1)); vertex order = index-map values
       <name>_lidar_intensities.png  LiDAR image, uint8
-      <name>_lidar_indices.png      int32 index map (-1 empty) as a 4-channel 8-bit PNG: the raw
-                                    little-endian bytes of each int32 as B, G, R, A
-      <name>_matches.json           keypoint matches (written by find-matches)
+      <name>_lidar_indices.png      int32 index map (-1 empty) as a 4-channel 8-bit PNG
+                                    (:mod:`nbcalib.io.index_map`)
+      <name>_matches.json           keypoint matches, the reference's format (find-matches)
+      <name>_matches.png            the matches drawn (nbcalib)
+      <name>_correspondences.json   the 2D-3D correspondences matching found (nbcalib)
+      nbcalib_config.yaml           the config used (nbcalib; ``--config`` reads it back)
+      report/, export/              the quality report and exported formats (nbcalib)
 
-The index map decodes with ``cv2.imread(path, cv2.IMREAD_UNCHANGED).view('<i4')[..., 0]``
-(:func:`decode_index_map`); an empty pixel is -1, all four bytes 0xFF.
+nbcalib's additions to ``calib.json`` live under its ``nbcalib`` key, which the reference
+ignores: the virtual camera that rendered the LiDAR images (``virtual_camera``), the inputs
+(``inputs``), and for each stage what made its product (``made``: the config sections and
+inputs it used), from which :class:`nbcalib.pipeline.Calibrator` decides, product by product,
+what a resumed job can keep. A directory written by the reference toolbox has none of these:
+its products are kept as they are, and read as the reference means them.
 
 **Crash safety.** ``calib.json`` marks a finished preprocessing run. :meth:`WorkDir.prepare`
 removes an existing one before anything else is written, every product is written to a
 temporary file and renamed into place, and :meth:`WorkDir.write_calib` (atomic as well) comes
 last. A run that dies half-way therefore leaves a directory without ``calib.json``, which
 :meth:`WorkDir.is_complete` and the later commands reject.
-
-nbcalib also records the virtual camera that rendered the LiDAR images under
-``calib.json``'s ``nbcalib.virtual_camera`` (:func:`set_virtual_camera`); the reference ignores
-it.
 """
 
 from __future__ import annotations
 
+import json
 import os
-from dataclasses import dataclass
+import shutil
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from nbcalib.camera import CameraModel
 from nbcalib.errors import InputError
 from nbcalib.io.calib_json import CalibFile, read_calib_json, write_calib_json
+from nbcalib.io.index_map import read_index_map, write_index_map
+from nbcalib.products import PairData, VirtualCamera
+
+if TYPE_CHECKING:  # the camera module loads the numba kernels
+    from nbcalib.camera import CameraModel
 
 __all__ = [
     "CALIB_FILE",
+    "CONFIG_FILE",
     "PLAIN_FILES_NAME",
     "WorkDir",
-    "WorkPair",
-    "decode_index_map",
-    "encode_index_map",
     "get_virtual_camera",
     "make_calib",
-    "read_index_map",
     "set_virtual_camera",
-    "write_index_map",
 ]
 
 #: File name of the job description.
 CALIB_FILE = "calib.json"
+#: File name of the used configuration (:func:`nbcalib.config.write_config`).
+CONFIG_FILE = "nbcalib_config.yaml"
 #: Data name used for plain point/image files (as the reference's ``preprocess_map``).
 PLAIN_FILES_NAME = "000000"
 #: Value of the ``meta`` topic fields when the input is not a bag (as ``preprocess_map``).
 NOT_APPLICABLE = "N/A"
+#: Folders of products derived from a result (nbcalib's report and exports).
+DERIVED_FOLDERS = ("report", "export")
 
-_INDEX_DTYPE = np.dtype("<i4")
 _VIRTUAL_CAMERA_KEY = "virtual_camera"
-
-
-# --------------------------------------------------------------------------------------------
-# Index map <-> 4-channel PNG
-
-
-def encode_index_map(index) -> np.ndarray:
-    """Bytes of an int32 index map as an (H, W, 4) uint8 image (OpenCV's B, G, R, A order).
-
-    Parameters
-    ----------
-    index : array_like of shape (H, W), integer
-        Point indices, -1 where empty; every value must fit int32.
-
-    Returns
-    -------
-    ndarray of shape (H, W, 4), uint8
-        Channel ``k`` holds byte ``k`` of the little-endian int32; pass it to ``cv2.imwrite`` /
-        ``cv2.imencode`` as is (OpenCV treats 4 channels as BGRA).
-    """
-    index = np.asarray(index)
-    if index.ndim != 2 or index.dtype.kind not in "iu":
-        raise ValueError(f"index must be an (H, W) integer array, got {index.dtype} {index.shape}")
-    info = np.iinfo(np.int32)
-    if index.size and (index.min() < -1 or index.max() > info.max):
-        raise ValueError("index values must be -1 or in [0, 2**31 - 1]")
-    little = np.ascontiguousarray(index, dtype=_INDEX_DTYPE)
-    return little.view(np.uint8).reshape(*index.shape, 4)
-
-
-def decode_index_map(image) -> np.ndarray:
-    """Inverse of :func:`encode_index_map`: (H, W, 4) uint8 (B, G, R, A) to (H, W) int32."""
-    image = np.asarray(image)
-    if image.ndim != 3 or image.shape[2] != 4 or image.dtype != np.uint8:
-        raise ValueError(f"expected an (H, W, 4) uint8 image, got {image.dtype} {image.shape}")
-    values = np.ascontiguousarray(image).view(_INDEX_DTYPE)[..., 0]
-    return values.astype(np.int32)
-
-
-def write_index_map(path, index) -> None:
-    """Write an index map as the reference's 4-channel 8-bit PNG, atomically."""
-    import cv2
-
-    from nbcalib.io._files import write_bytes_atomic
-
-    ok, encoded = cv2.imencode(".png", encode_index_map(index))
-    if not ok:  # pragma: no cover - OpenCV encodes every (H, W, 4) uint8 image
-        raise RuntimeError("OpenCV could not encode the index map as PNG")
-    write_bytes_atomic(path, [encoded.tobytes()])
-
-
-def read_index_map(path) -> np.ndarray:
-    """Read ``<name>_lidar_indices.png``.
-
-    Returns
-    -------
-    ndarray of shape (H, W), int32
-        Point indices, -1 where empty.
-
-    Raises
-    ------
-    InputError
-        Missing or undecodable file, not a 4-channel 8-bit image, or values below -1.
-    """
-    import cv2
-
-    path = Path(path)
-    image = cv2.imdecode(_read_file_bytes(path), cv2.IMREAD_UNCHANGED)
-    if image is None:
-        raise InputError("cannot decode as an image (corrupt or unknown format)", path)
-    if image.ndim != 3 or image.shape[2] != 4 or image.dtype != np.uint8:
-        channels = 1 if image.ndim == 2 else image.shape[2]
-        raise InputError(
-            f"not an index map: expected a 4-channel 8-bit PNG, got {channels} channel(s) of "
-            f"{image.dtype}",
-            path,
-        )
-    index = decode_index_map(image)
-    if index.size and index.min() < -1:
-        raise InputError(f"not an index map: holds the value {index.min()} (< -1)", path)
-    return index
-
-
-def _read_file_bytes(path: Path) -> np.ndarray:
-    try:
-        data = np.fromfile(path, dtype=np.uint8)
-    except FileNotFoundError:
-        raise InputError("file not found", path) from None
-    except IsADirectoryError:
-        raise InputError("is a directory, expected a file", path) from None
-    if data.size == 0:
-        raise InputError("empty file", path)
-    return data
+_CORRESPONDENCES_FORMAT = "nbcalib-correspondences"
 
 
 # --------------------------------------------------------------------------------------------
@@ -191,35 +108,21 @@ def make_calib(
     return calib
 
 
-def set_virtual_camera(calib: CalibFile, camera: CameraModel, T_vcam_lidar) -> None:
-    """Record the virtual camera of the LiDAR images under ``nbcalib.virtual_camera``.
-
-    Parameters
-    ----------
-    calib : CalibFile
-        Updated in place.
-    camera : CameraModel
-        The virtual camera (:func:`nbcalib.preprocess.lidar_image.make_virtual_camera`).
-    T_vcam_lidar : array_like of shape (4, 4)
-        ``p_vcam = T_vcam_lidar @ p_lidar``.
-    """
-    T = np.asarray(T_vcam_lidar, dtype=np.float64)
+def set_virtual_camera(calib: CalibFile, virtual: VirtualCamera) -> None:
+    """Record the virtual camera of the LiDAR images under ``nbcalib.virtual_camera``."""
+    T = np.asarray(virtual.T_vcam_lidar, dtype=np.float64)
     if T.shape != (4, 4) or not np.all(np.isfinite(T)):
         raise ValueError(f"T_vcam_lidar must be a finite 4 x 4 matrix, got shape {T.shape}")
-    calib.nbcalib[_VIRTUAL_CAMERA_KEY] = {
-        "camera": camera.to_dict(),
-        "T_vcam_lidar": T.tolist(),
-    }
+    entry = {"camera": virtual.camera.to_dict(), "T_vcam_lidar": T.tolist()}
+    if virtual.fov_deg is not None:
+        entry["lidar_fov_deg"] = float(virtual.fov_deg)
+    calib.nbcalib[_VIRTUAL_CAMERA_KEY] = entry
 
 
-def get_virtual_camera(calib: CalibFile) -> tuple[CameraModel, np.ndarray] | None:
-    """The virtual camera recorded by :func:`set_virtual_camera`, or None (reference-made dirs).
+def get_virtual_camera(calib: CalibFile) -> VirtualCamera | None:
+    """The virtual camera recorded by :func:`set_virtual_camera`, or None (reference-made dirs)."""
+    from nbcalib.camera import CameraModel
 
-    Returns
-    -------
-    camera : CameraModel
-    T_vcam_lidar : ndarray of shape (4, 4), float64
-    """
     entry = calib.nbcalib.get(_VIRTUAL_CAMERA_KEY)
     if entry is None:
         return None
@@ -228,58 +131,24 @@ def get_virtual_camera(calib: CalibFile) -> tuple[CameraModel, np.ndarray] | Non
         T = np.array(entry["T_vcam_lidar"], dtype=np.float64)
         if T.shape != (4, 4) or not np.all(np.isfinite(T)):
             raise ValueError("T_vcam_lidar is not a finite 4 x 4 matrix")
+        fov = entry.get("lidar_fov_deg")
+        fov = float(fov) if isinstance(fov, (int, float)) else None
     except (KeyError, TypeError, ValueError) as exc:
         raise InputError(f"invalid nbcalib.{_VIRTUAL_CAMERA_KEY}: {exc}", calib.path) from None
-    return camera, T
+    return VirtualCamera(camera, T, fov)
 
 
 # --------------------------------------------------------------------------------------------
 # The directory
 
 
-@dataclass(frozen=True)
-class WorkPair:
-    """One data name's products, as loaded from a work directory.
-
-    Attributes
-    ----------
-    name : str
-        The data name (``<name>.png`` etc.).
-    image : ndarray of shape (H, W), uint8
-        The camera image (equalised grey).
-    points_lidar : ndarray of shape (N, 3), float64
-        The dense cloud in the LiDAR frame, metres (stored as float32).
-    intensities : ndarray of shape (N,), float64
-        Equalised intensities in [0, 1) (stored as float32).
-    lidar_intensity : ndarray of shape (H', W'), uint8
-        The LiDAR image.
-    lidar_index : ndarray of shape (H', W'), int32
-        Row of ``points_lidar`` shown by each LiDAR-image pixel, -1 where empty.
-    """
-
-    name: str
-    image: np.ndarray
-    points_lidar: np.ndarray
-    intensities: np.ndarray
-    lidar_intensity: np.ndarray
-    lidar_index: np.ndarray
-
-
 class WorkDir:
-    """A work directory (module docstring): paths, writing one pair's products, loading them.
+    """A work directory (module docstring): paths, and saving and loading each product.
 
     Parameters
     ----------
     path : str or os.PathLike
         The directory (need not exist until :meth:`prepare`).
-
-    Examples
-    --------
-    >>> wd = WorkDir("out")                                      # doctest: +SKIP
-    >>> wd.prepare()                                             # doctest: +SKIP
-    >>> wd.write_pair("000000", image=img, points_lidar=pts, intensities=eq,
-    ...               lidar_image=render_lidar_image(vcam, T_vcam_lidar, pts, eq))  # doctest: +SKIP
-    >>> wd.write_calib(make_calib(camera, ["000000"]))          # doctest: +SKIP
     """
 
     def __init__(self, path: str | os.PathLike):
@@ -293,6 +162,11 @@ class WorkDir:
     def calib_path(self) -> Path:
         """``calib.json``."""
         return self.path / CALIB_FILE
+
+    @property
+    def config_path(self) -> Path:
+        """``nbcalib_config.yaml``: the config used."""
+        return self.path / CONFIG_FILE
 
     def image_path(self, name: str) -> Path:
         """``<name>.png``: the camera image."""
@@ -311,8 +185,16 @@ class WorkDir:
         return self.path / f"{name}_lidar_indices.png"
 
     def matches_path(self, name: str) -> Path:
-        """``<name>_matches.json``: keypoint matches (find-matches)."""
+        """``<name>_matches.json``: keypoint matches (find-matches, or the reference's script)."""
         return self.path / f"{name}_matches.json"
+
+    def matches_picture_path(self, name: str) -> Path:
+        """``<name>_matches.png``: the matches drawn."""
+        return self.path / f"{name}_matches.png"
+
+    def correspondences_path(self, name: str) -> Path:
+        """``<name>_correspondences.json``: the 2D-3D correspondences of matching."""
+        return self.path / f"{name}_correspondences.json"
 
     def product_paths(self, name: str) -> list[Path]:
         """The four files preprocessing writes for ``name``."""
@@ -323,71 +205,20 @@ class WorkDir:
             self.lidar_index_path(name),
         ]
 
-    # ---------------------------------------------------------------- writing
-    def prepare(self) -> None:
-        """Create the directory and remove an existing ``calib.json`` before products change.
+    def match_paths(self, name: str) -> list[Path]:
+        """The files matching writes for ``name``."""
+        return [
+            self.matches_path(name),
+            self.matches_picture_path(name),
+            self.correspondences_path(name),
+        ]
 
-        Without ``calib.json`` the directory does not look complete until :meth:`write_calib`
-        has run, whatever happens in between.
-        """
-        if self.path.exists() and not self.path.is_dir():
-            raise InputError("exists and is not a directory", self.path)
-        self.path.mkdir(parents=True, exist_ok=True)
-        self.calib_path.unlink(missing_ok=True)
-
-    def write_pair(
-        self,
-        name: str,
-        *,
-        image,
-        points_lidar,
-        intensities,
-        lidar_image,
-    ) -> None:
-        """Write one data name's products (each atomically); ``calib.json`` is not touched.
-
-        A stale ``<name>_matches.json`` (keypoints of an older LiDAR image) is removed.
-
-        Parameters
-        ----------
-        name : str
-            Data name: a bag's name, or :data:`PLAIN_FILES_NAME`.
-        image : ndarray of shape (H, W), uint8
-            The camera image to store (already equalised if wanted).
-        points_lidar : array_like of shape (N, 3)
-            The dense cloud, LiDAR frame, metres; written as float32 in this order.
-        intensities : array_like of shape (N,)
-            Equalised intensities in [0, 1], written as float32.
-        lidar_image : LidarImage
-            Rendered from exactly these points (its indices refer to their rows).
-        """
-        from nbcalib.io.image import write_png
-        from nbcalib.io.ply import write_ply
-
-        _check_name(name)
-        image = np.asarray(image)
-        if image.ndim != 2 or image.dtype != np.uint8:
-            raise ValueError(f"image must be (H, W) uint8, got {image.dtype} {image.shape}")
-        points = np.asarray(points_lidar, dtype=np.float64)
-        if points.ndim != 2 or points.shape[1] != 3:
-            raise ValueError(f"points_lidar must have shape (N, 3), got {points.shape}")
-        values = np.asarray(intensities, dtype=np.float64)
-        if values.shape != (len(points),):
-            raise ValueError(f"intensities must have shape ({len(points)},), got {values.shape}")
-        index = np.asarray(lidar_image.index)
-        if index.size and index.max() >= len(points):
-            raise ValueError(
-                f"the index map refers to point {index.max()}, the cloud has {len(points)}"
-            )
-        if lidar_image.intensity.shape != index.shape:
-            raise ValueError("lidar_image intensity and index maps differ in size")
+    # ---------------------------------------------------------------- calib.json
+    def read_calib(self) -> CalibFile:
+        """Read ``calib.json`` (:class:`InputError` if missing or invalid)."""
         if not self.path.is_dir():
-            raise ValueError(f"{self.path} does not exist; call prepare() first")
-        self.matches_path(name).unlink(missing_ok=True)
-        write_png(self.image_path(name), image)
-        write_ply(self.cloud_path(name), points.astype(np.float32), values.astype(np.float32))
-        write_png(self.lidar_intensity_path(name), np.asarray(lidar_image.intensity, np.uint8))
-        write_index_map(self.lidar_index_path(name), index)
+            raise InputError("work directory not found", self.path)
+        return read_calib_json(self.calib_path)
 
     def write_calib(self, calib: CalibFile) -> None:
         """Write ``calib.json`` (atomically): the last step, which marks the directory complete.
@@ -399,13 +230,6 @@ class WorkDir:
             if missing:
                 raise ValueError(f"cannot finish {self.path}: missing {', '.join(missing)}")
         write_calib_json(self.calib_path, calib)
-
-    # ---------------------------------------------------------------- reading
-    def read_calib(self) -> CalibFile:
-        """Read ``calib.json`` (:class:`InputError` if missing or invalid)."""
-        if not self.path.is_dir():
-            raise InputError("work directory not found", self.path)
-        return read_calib_json(self.calib_path)
 
     def names(self) -> list[str]:
         """Data names: ``meta.bag_names`` of ``calib.json``, else the stems of ``*.ply`` files."""
@@ -423,7 +247,70 @@ class WorkDir:
             return False
         return bool(names) and all(p.is_file() for n in names for p in self.product_paths(n))
 
-    def load_pair(self, name: str) -> WorkPair:
+    def require_preprocessed(self) -> CalibFile:
+        """``calib.json`` of a preprocessed directory, else an :class:`InputError` saying why."""
+        if not self.path.is_dir():
+            raise InputError("work directory not found", self.path)
+        if not self.calib_path.is_file():
+            raise InputError("no calib.json: run 'nbcalib preprocess' first", self.calib_path)
+        calib = self.read_calib()
+        if not calib.bag_names:
+            raise InputError("meta.bag_names is empty: nothing to use", self.calib_path)
+        return calib
+
+    # ---------------------------------------------------------------- preprocessing
+    def prepare(self) -> None:
+        """Create the directory and remove what a new preprocessing run makes stale.
+
+        ``calib.json`` goes first: without it the directory does not look complete until
+        :meth:`write_calib` has run, whatever happens in between. The report and exports of an
+        earlier result go as well (:meth:`remove_derived`).
+        """
+        if self.path.exists() and not self.path.is_dir():
+            raise InputError("exists and is not a directory", self.path)
+        try:
+            self.path.mkdir(parents=True, exist_ok=True)
+            self.calib_path.unlink(missing_ok=True)
+        except OSError as exc:
+            raise InputError(f"cannot write here: {exc.strerror or exc}", self.path) from None
+        self.remove_derived()
+
+    def write_pair(self, pair: PairData) -> None:
+        """Write one pair's products (each atomically); ``calib.json`` is not touched.
+
+        Matching products of an older LiDAR image (``<name>_matches.json`` ...) are removed.
+        """
+        from nbcalib.io.image import write_png
+        from nbcalib.io.ply import write_ply
+
+        _check_name(pair.name)
+        image = np.asarray(pair.image)
+        if image.ndim != 2 or image.dtype != np.uint8:
+            raise ValueError(f"image must be (H, W) uint8, got {image.dtype} {image.shape}")
+        points = np.asarray(pair.points_lidar, dtype=np.float64)
+        if points.ndim != 2 or points.shape[1] != 3:
+            raise ValueError(f"points_lidar must have shape (N, 3), got {points.shape}")
+        values = np.asarray(pair.intensities, dtype=np.float64)
+        if values.shape != (len(points),):
+            raise ValueError(f"intensities must have shape ({len(points)},), got {values.shape}")
+        lidar_image = pair.lidar_image
+        index = np.asarray(lidar_image.index)
+        if index.size and index.max() >= len(points):
+            raise ValueError(
+                f"the index map refers to point {index.max()}, the cloud has {len(points)}"
+            )
+        if lidar_image.intensity.shape != index.shape:
+            raise ValueError("lidar_image intensity and index maps differ in size")
+        if not self.path.is_dir():
+            raise ValueError(f"{self.path} does not exist; call prepare() first")
+        for path in self.match_paths(pair.name):
+            path.unlink(missing_ok=True)
+        write_png(self.image_path(pair.name), image)
+        write_ply(self.cloud_path(pair.name), points.astype(np.float32), values.astype(np.float32))
+        write_png(self.lidar_intensity_path(pair.name), np.asarray(lidar_image.intensity, np.uint8))
+        write_index_map(self.lidar_index_path(pair.name), index)
+
+    def load_pair(self, name: str) -> PairData:
         """Load one data name's products and check that they fit together.
 
         Raises
@@ -434,6 +321,7 @@ class WorkDir:
         """
         from nbcalib.io.image import read_image
         from nbcalib.io.ply import read_ply_fields
+        from nbcalib.preprocess.lidar_image import LidarImage
 
         _check_name(name)
         image = _read_uint8(self.image_path(name), read_image)
@@ -458,7 +346,114 @@ class WorkDir:
                 f"index map refers to point {index.max()}, {cloud_path.name} has {len(points)}",
                 index_path,
             )
-        return WorkPair(name, image, points, intensities, lidar_intensity, index)
+        lidar_image = LidarImage(lidar_intensity, index, None)
+        return PairData(name, image, points, intensities, lidar_image)
+
+    def load_pairs(self, names=None) -> list[PairData]:
+        """:meth:`load_pair` for each name (default: every name of ``calib.json``)."""
+        return [self.load_pair(name) for name in (self.names() if names is None else names)]
+
+    # ---------------------------------------------------------------- matching
+    def write_matches(self, found, pair: PairData, *, draw: bool = True) -> None:
+        """Save one pair's matching result (:class:`~nbcalib.matching.find.PairMatches`).
+
+        Writes ``<name>_correspondences.json`` (nbcalib's product: every correspondence, its
+        camera pixel, cloud row and confidence), ``<name>_matches.json`` (the reference's
+        format: the correspondences the stored LiDAR image shows) and, with ``draw``,
+        ``<name>_matches.png``.
+        """
+        from nbcalib.io._files import write_text_atomic
+        from nbcalib.io.image import write_png
+        from nbcalib.matching.draw import draw_matches
+        from nbcalib.matching.matches import write_matches_json
+
+        corr = found.correspondences
+        doc = {
+            "format": _CORRESPONDENCES_FORMAT,
+            "version": 1,
+            "name": pair.name,
+            "matcher": found.matcher,
+            "n_matches": int(corr.n_matches),
+            "uv_camera": corr.uv_camera.tolist(),
+            "point_index": corr.point_index.tolist(),
+            "confidence": None if corr.confidence is None else corr.confidence.tolist(),
+        }
+        write_text_atomic(self.correspondences_path(pair.name), json.dumps(doc) + "\n")
+        write_matches_json(self.matches_path(pair.name), found.matches)
+        picture = self.matches_picture_path(pair.name)
+        if draw:
+            write_png(picture, draw_matches(pair.image, pair.lidar_image.intensity, found.matches))
+        else:
+            picture.unlink(missing_ok=True)
+
+    def has_matches(self, name: str) -> bool:
+        """Matching's product for ``name`` is here (nbcalib's or the reference's)."""
+        return self.correspondences_path(name).is_file() or self.matches_path(name).is_file()
+
+    def read_correspondences(self, pair: PairData, *, search_radius: float):
+        """One pair's 2D-3D correspondences, as matching saved them.
+
+        nbcalib's ``<name>_correspondences.json`` when present; else the reference's
+        ``<name>_matches.json``, lifted through the index map (LiDAR keypoints on an empty
+        pixel take the nearest point within ``search_radius`` pixels).
+
+        Raises
+        ------
+        InputError
+            Neither file, or a corrupt one; the message says to run find-matches.
+        """
+        from nbcalib.matching.correspondences import Correspondences, correspondences_from_matches
+        from nbcalib.matching.matches import read_matches_json
+
+        path = self.correspondences_path(pair.name)
+        if not path.is_file():
+            matches_path = self.matches_path(pair.name)
+            if not matches_path.is_file():
+                raise InputError("no matches: run 'nbcalib find-matches' first", matches_path)
+            matches = read_matches_json(matches_path)
+            return correspondences_from_matches(
+                matches,
+                pair.lidar_index,
+                pair.points_lidar,
+                search_radius=search_radius,
+                name=pair.name,
+            )
+        try:
+            doc = json.loads(path.read_text())
+            if doc.get("format") != _CORRESPONDENCES_FORMAT:
+                raise ValueError(f"format is not {_CORRESPONDENCES_FORMAT}")
+            uv = np.array(doc["uv_camera"], dtype=np.float64).reshape(-1, 2)
+            rows = np.array(doc["point_index"], dtype=np.int64).reshape(-1)
+            confidence = doc["confidence"]
+            if confidence is not None:
+                confidence = np.array(confidence, dtype=np.float64).reshape(-1)
+            if len(uv) != len(rows) or (confidence is not None and len(confidence) != len(rows)):
+                raise ValueError("uv_camera, point_index and confidence differ in length")
+            if rows.size and (rows.min() < 0 or rows.max() >= len(pair.points_lidar)):
+                raise ValueError(f"point_index outside the cloud's {len(pair.points_lidar)} rows")
+            n_matches = int(doc["n_matches"])
+        except (OSError, ValueError, KeyError, TypeError, AttributeError) as exc:
+            raise InputError(
+                f"corrupt correspondences ({exc}); run find-matches again", path
+            ) from None
+        return Correspondences(
+            uv_camera=uv,
+            points_lidar=pair.points_lidar[rows],
+            uv_lidar=np.full((len(rows), 2), np.nan),  # pixels of views that are not stored
+            point_index=rows,
+            pair=np.zeros(len(rows), dtype=np.int64),
+            names=(pair.name,),
+            n_matches=n_matches,
+            confidence=confidence,
+        )
+
+    # ---------------------------------------------------------------- derived products
+    def remove_derived(self) -> None:
+        """Remove the report and exports: they describe a result that is about to change."""
+        for folder in DERIVED_FOLDERS:
+            target = self.path / folder
+            if target.is_dir():
+                shutil.rmtree(target, ignore_errors=True)
 
 
 def _check_name(name: str) -> None:

@@ -35,10 +35,10 @@ import numpy as np
 from nbcalib.camera import example_camera
 from nbcalib.initial_guess import (
     estimate_initial_guess,
-    match_views,
     synthetic_correspondences,
     translation_ransac,
 )
+from nbcalib.matching import match_views
 from nbcalib.metrics import pose_errors
 from nbcalib.preprocess.intensity import equalize_image, equalize_point_intensities
 from nbcalib.synthetic import RigConfig, default_T_camera_lidar, generate_sequence
@@ -138,7 +138,7 @@ found = match_views(
     points,
     equalize_point_intensities(intensities),
     matcher="auto",
-    n_headings=6 if QUICK else 12,
+    views=6 if QUICK else 12,
 )
 for k, view in enumerate(found.views):
     mark = "best" if k == found.best else ("pooled" if k in found.pooled else "")

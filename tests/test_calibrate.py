@@ -15,6 +15,7 @@ from nbcalib.preprocess.lidar_image import (
     make_virtual_camera,
     render_lidar_image,
 )
+from nbcalib.products import PairData
 from nbcalib.registration.refine import (
     RefineConfig,
     RegistrationPair,
@@ -40,11 +41,7 @@ def workdir(tmp_path):
     work = WorkDir(tmp_path / "work")
     work.prepare()
     work.write_pair(
-        "000000",
-        image=np.round(image * 255).astype(np.uint8),
-        points_lidar=points,
-        intensities=intensities,
-        lidar_image=lidar_image,
+        PairData("000000", np.round(image * 255).astype(np.uint8), points, intensities, lidar_image)
     )
     work.write_calib(make_calib(cam, ["000000"]))
     return work
@@ -96,7 +93,7 @@ def test_calibrate_user_errors(workdir, capsys, args, message):
 
 def test_calibrate_without_preprocessing(tmp_path, capsys):
     assert main(["calibrate", str(tmp_path)]) == 2
-    assert "run nbcalib preprocess first" in capsys.readouterr().err
+    assert "run 'nbcalib preprocess' first" in capsys.readouterr().err
 
 
 # --- coarse-to-fine pyramid of fine registration ----------------------------------------------

@@ -30,24 +30,11 @@ TOP_LEVEL = (
     "pyproject.toml",
 )
 
-#: docs/BENCHMARKS.md is being rewritten on another branch; its stale names are reported (xfail)
-#: until the rewrite lands. Then drop this mark so that it is checked like the others.
-_BENCHMARKS_PENDING = pytest.mark.xfail(
-    strict=False, reason="docs/BENCHMARKS.md is being rewritten; switch on once it lands"
-)
-
 
 def _documents():
     docs = sorted((ROOT / "docs").glob("*.md"))
-    names = [ROOT / "README.md", *docs, ROOT / "notebooks" / "README.md"]
-    return [
-        pytest.param(
-            path,
-            id=path.relative_to(ROOT).as_posix(),
-            marks=[_BENCHMARKS_PENDING] if path.name == "BENCHMARKS.md" else [],
-        )
-        for path in names
-    ]
+    names = [ROOT / "README.md", ROOT / "CHANGELOG.md", *docs, ROOT / "notebooks" / "README.md"]
+    return [pytest.param(path, id=path.relative_to(ROOT).as_posix()) for path in names]
 
 
 DOCUMENTS = _documents()

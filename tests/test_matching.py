@@ -236,7 +236,7 @@ def test_match_images_checks_its_inputs(warped_pair):
     image, warped, _ = warped_pair
     with pytest.raises(ValueError, match="uint8"):
         match_images(image.astype(float), warped, matcher="sift")
-    with pytest.raises(ValueError, match="unknown matcher"):
+    with pytest.raises(ValueError, match="matcher must be one of"):
         match_images(image, warped, matcher="superglue")
     with pytest.raises(ValueError, match="rotate_camera"):
         match_images(image, warped, matcher="sift", rotate_camera=30)
@@ -325,17 +325,21 @@ def test_draw_matches_side_by_side(rng):
 @pytest.fixture
 def workdir(tmp_path, warped_pair):
     from nbcalib.camera import create_camera
-    from nbcalib.io.image import write_png
+    from nbcalib.preprocess.lidar_image import LidarImage
+    from nbcalib.products import PairData
     from nbcalib.workdir import WorkDir, make_calib
 
     image, warped, _ = warped_pair
     wd = WorkDir(tmp_path / "work")
     wd.prepare()
-    write_png(wd.image_path("000000"), image)
-    write_png(wd.lidar_intensity_path("000000"), warped)
+    # a work directory as the reference writes one (no virtual camera recorded); the "LiDAR
+    # image" is a warped copy of the camera image, each pixel showing a point of its own
+    index = np.arange(warped.size, dtype=np.int32).reshape(warped.shape)
+    points = np.random.default_rng(0).normal(size=(warped.size, 3))
+    intensities = warped.reshape(-1) / 255.0
+    wd.write_pair(PairData("000000", image, points, intensities, LidarImage(warped, index, None)))
     camera = create_camera("pinhole", [300, 300, 239.5, 179.5], [], 480, 360)
-    # find-matches reads only the two images and calib.json
-    (wd.calib_path).write_text(json.dumps(make_calib(camera, ["000000"]).to_dict()))
+    wd.write_calib(make_calib(camera, ["000000"]))
     return wd
 
 
@@ -343,10 +347,15 @@ def test_find_matches_writes_json_and_picture(workdir, tmp_path, monkeypatch):
     from nbcalib.cli import main
 
     monkeypatch.setenv("NBCALIB_MODEL_DIR", str(tmp_path / "no-models"))
-    assert main(["-q", "find-matches", str(workdir.path), "--matcher", "auto"]) == 0
+    # --views 0: the stored LiDAR image, as the reference toolbox matches
+    assert main(["-q", "find-matches", str(workdir.path), "--matcher", "auto", "--views", "0"]) == 0
     m = read_matches_json(workdir.matches_path("000000"))
     assert m.matcher == "sift" and m.num_matches >= 50
+    # the file's LiDAR keypoints are whole pixels, each the pixel that shows its point
+    np.testing.assert_array_equal(m.kpts_lidar, np.round(m.kpts_lidar))
     assert (workdir.path / "000000_matches.png").is_file()
+    corr = workdir.read_correspondences(workdir.load_pair("000000"), search_radius=0.0)
+    assert len(corr) == m.num_matches
 
 
 def test_find_matches_without_preprocessing_is_a_user_error(tmp_path, capsys):

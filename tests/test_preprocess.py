@@ -148,7 +148,7 @@ def test_camera_file(plain_files, tmp_path):
         (lambda c, i, t: [str(c), str(i)], "last argument must be WORKDIR"),
         (
             lambda c, i, t: [str(c), str(i), str(t / "w"), *CAMERA, "--voxel-size", "0"],
-            "voxel size",
+            "voxel_size must be",
         ),
     ],
 )
@@ -212,7 +212,7 @@ def test_real_kitti_scan(real_data, tmp_path):
     assert status == 0
     pair = WorkDir(work).load_pair("000000")
     assert pair.image.shape == (375, 1242)
-    assert pair.lidar_intensity.shape == (960, 1920)  # 360-degree LiDAR: equirectangular
+    assert pair.lidar_image.intensity.shape == (960, 1920)  # 360-degree LiDAR: equirectangular
     assert (pair.lidar_index >= 0).sum() > 90_000
 
 

@@ -21,10 +21,11 @@ from tolerances import TOL
 from nbcalib.io.calib_json import read_ground_truth
 from nbcalib.io.camera_file import load_camera
 from nbcalib.metrics import pose_errors
-from nbcalib.preprocess.pipeline import PreprocessConfig, gather_files, preprocess
+from nbcalib.preprocess.config import PreprocessConfig
+from nbcalib.preprocess.inputs import gather_files
+from nbcalib.preprocess.prepare import prepare_pair
 from nbcalib.registration.refine import RefineConfig, RegistrationPair, refine
 from nbcalib.transforms import invert_T, make_T, so3_exp
-from nbcalib.workdir import WorkDir
 
 
 def _perturbed(T_camera_lidar, seed, *, angle_deg=1.0, distance=0.05):
@@ -40,11 +41,11 @@ def _perturbed(T_camera_lidar, seed, *, angle_deg=1.0, distance=0.05):
 
 @pytest.mark.slow
 @pytest.mark.realdata
-def test_kitti_five_pairs_converge_towards_reference(real_data, tmp_path):
+def test_kitti_five_pairs_converge_towards_reference(real_data):
     kitti = real_data / "kitti_raw_2011_09_26"
     calib = kitti / "calib" / "calib_normalized_cam2rect.json"
     camera, T_ref = load_camera(calib), read_ground_truth(calib)
-    # the work directory as `nbcalib preprocess` writes it for five single scans
+    # the pairs as `nbcalib preprocess` makes (and writes) them for five single scans
     config = PreprocessConfig(mode="static")
     inputs = [
         gather_files(
@@ -55,12 +56,10 @@ def test_kitti_five_pairs_converge_towards_reference(real_data, tmp_path):
         )
         for k in range(5)
     ]
-    preprocess(inputs, tmp_path, camera=camera, config=config, log=lambda line: None)
-    work = WorkDir(tmp_path)
     pairs = []
-    for name in work.names():
-        p = work.load_pair(name)
-        pairs.append(RegistrationPair(camera, p.image, p.points_lidar, p.intensities, name))
+    for pair in inputs:
+        p = prepare_pair(pair, config)
+        pairs.append(RegistrationPair(camera, p.image, p.points_lidar, p.intensities, p.name))
     assert len(pairs) == 5
 
     T_init = _perturbed(T_ref, seed=0)

@@ -18,6 +18,7 @@ from nbcalib.preprocess.lidar_image import (
     make_virtual_camera,
     render_lidar_image,
 )
+from nbcalib.products import PairData
 from nbcalib.registration.refine import RegistrationPair
 from nbcalib.report import AssessConfig, assess, rejudge
 from nbcalib.transforms import se3_exp, se3_log
@@ -263,11 +264,7 @@ def workdir(tmp_path, pair):
     work = WorkDir(tmp_path / "work")
     work.prepare()
     work.write_pair(
-        "000000",
-        image=pair.image,
-        points_lidar=pair.points_lidar,
-        intensities=pair.intensities,
-        lidar_image=lidar_image,
+        PairData("000000", pair.image, pair.points_lidar, pair.intensities, lidar_image)
     )
     calib = make_calib(pair.camera, ["000000"])
     calib.set_T_camera_lidar("init_T_lidar_camera", se3_exp(np.array([0.03, 0, 0, 0, 0.01, 0])))
@@ -347,7 +344,7 @@ def test_report_flags_a_garbage_result(workdir):
     "setup, message",
     [
         ("no_result", "run nbcalib calibrate first"),
-        ("no_calib", "run nbcalib preprocess first"),
+        ("no_calib", "run 'nbcalib preprocess' first"),
         ("no_dir", "work directory not found"),
         ("no_cloud", "000000.ply"),
     ],

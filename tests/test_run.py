@@ -10,7 +10,7 @@ import pytest
 
 from nbcalib.camera import example_camera
 from nbcalib.cli import main
-from nbcalib.config import CONFIG_FILE, load_config
+from nbcalib.config import read_config_file
 from nbcalib.io.calib_json import read_calib_json
 from nbcalib.io.camera_file import save_camera
 from nbcalib.io.image import write_png
@@ -75,22 +75,26 @@ def test_run_calibrates_and_records_the_options(finished):
     calib = read_calib_json(finished / "calib.json")
     dt, dr = pose_error(invert_T(calib.get_T_camera_lidar("T_lidar_camera")), invert_T(T_TRUE))
     assert dt < 0.005 and dr < 0.05, (dt, dr)
-    config = calib.nbcalib["config"]
-    assert {"preprocess", "find-matches", "initial-guess", "calibrate"} <= set(config)
-    assert config["find-matches"]["matcher"] == "sift"
-    assert config["calibrate"]["max_outer"] == 2
-    assert config["preprocess"]["inputs"][0].endswith("points.npy")
-    # the YAML copy uses option names, and --config reads it back
-    options = load_config(finished / CONFIG_FILE)
-    assert options["--max-outer"] == 2 and options["--voxel-size"] == 0.002
-    assert options["--camera"].endswith("camera.yaml")
+    config = calib.nbcalib["config"]  # the whole config tree used
+    assert config["matching"]["matcher"] == "sift"
+    assert config["refine"]["max_outer"] == 2 and config["initial_guess"]["min_inliers"] == 1000
+    assert calib.nbcalib["inputs"]["inputs"][0].endswith("points.npy")
+    # what made each product is recorded (the resume decisions use it)
+    assert {"preprocess", "find-matches", "initial-guess", "calibrate"} <= set(
+        calib.nbcalib["made"]
+    )
+    # the YAML copy holds the same tree, and --config reads it back
+    written = read_config_file(finished / "nbcalib_config.yaml")
+    assert written["refine"]["max_outer"] == 2 and written["preprocess"]["voxel_size"] == 0.002
+    assert written["inputs"]["camera"].endswith("camera.yaml")
 
 
 def test_run_falls_back_to_init_and_says_so(finished):
     calib = read_calib_json(finished / "calib.json")
     assert not calib.has_result("init_T_lidar_camera_auto")
     assert calib.nbcalib["calibration"]["start"] == "--init"
-    assert calib.nbcalib["config"]["run"]["init"] == INIT.split("=", 1)[1]
+    assert calib.nbcalib["run"]["init"] == INIT.split("=", 1)[1]
+    assert calib.nbcalib["initial_guess"]["failed"]
 
 
 def test_run_resumes_without_redoing_finished_stages(finished, tmp_path, caplog, capsys):
@@ -108,7 +112,7 @@ def test_run_continues_an_interrupted_job(finished, tmp_path, caplog):
     work = _copy(finished, tmp_path)
     calib = read_calib_json(work / "calib.json")
     del calib.results["T_lidar_camera"]
-    del calib.nbcalib["config"]["calibrate"]
+    del calib.nbcalib["made"]["calibrate"]
     (work / "calib.json").write_text(json.dumps(calib.to_dict()))
     caplog.set_level("INFO", logger="nbcalib")
     assert main(["run", str(work), "--max-outer", "1"]) == 0
@@ -128,10 +132,10 @@ def test_run_refuses_to_overwrite_a_finished_result(finished, inputs, tmp_path, 
     # --from calibrate: only calibrate runs again, with the new option
     assert main(["run", str(work), "--from", "calibrate", "--bins", "8", "--max-outer", "1"]) == 0
     calib = read_calib_json(work / "calib.json")
-    assert calib.nbcalib["config"]["calibrate"]["bins"] == 8
+    assert calib.nbcalib["config"]["refine"]["bins"] == 8
     assert (
-        calib.nbcalib["config"]["preprocess"]
-        == read_calib_json(finished / "calib.json").nbcalib["config"]["preprocess"]
+        calib.nbcalib["made"]["preprocess"]
+        == read_calib_json(finished / "calib.json").nbcalib["made"]["preprocess"]
     )
 
 
@@ -150,18 +154,21 @@ def test_run_reads_a_config_file(inputs, tmp_path):
         main([*argv, "--config", str(config), "--voxel-size", "0.005", "--until", "find-matches"])
         == 0
     )
-    used = read_calib_json(work / "calib.json").nbcalib["config"]
+    calib = read_calib_json(work / "calib.json")
+    used = calib.nbcalib["config"]
     assert used["preprocess"]["voxel_size"] == 0.005 and used["preprocess"]["min_distance"] == 0.5
-    assert used["find-matches"]["matcher"] == "sift" and used["find-matches"]["no_picture"]
+    assert used["matching"]["matcher"] == "sift" and not used["matching"]["draw"]
     assert not (work / "000000_matches.png").exists()
-    assert "calibrate" not in used
+    assert "calibrate" not in calib.nbcalib["made"]
 
 
 @pytest.mark.parametrize(
     "text, message",
     [
         ("no_such_option = 1\n", "unknown option --no-such-option"),
-        ("bins = 'many'\n", "--bins"),
+        ("bins = 'many'\n", "refine.bins must be an integer"),
+        ("[refine]\nbins = 1\n", "bins must be >= 2"),
+        ("[matching]\nmatchr = 'sift'\n", "unknown option --matchr"),
         ("dynamic = 'yes'\n", "true or false"),
         ("[nonsense]\nbins = 3\n", "unknown table"),
         ("bins = \n", "invalid TOML"),
@@ -177,20 +184,23 @@ def test_bad_config_files_name_the_file(inputs, tmp_path, capsys, text, message)
 
 
 def test_yaml_config_and_write_config_round_trip(tmp_path):
-    from nbcalib.config import write_config
+    from nbcalib.commands._options import file_settings
+    from nbcalib.config import CalibrationConfig, config_from_dict, set_values, write_config
 
-    write_config(
-        tmp_path / "c.yaml",
-        {"preprocess": {"voxel_size": 0.01, "inputs": ["a.bag"]}, "calibrate": {"bins": 8}},
+    config = set_values(
+        CalibrationConfig(),
+        {"preprocess.voxel_size": 0.01, "refine.bins": 8, "preprocess.odometry.knn": 12},
     )
-    assert load_config(tmp_path / "c.yaml") == {
-        "--voxel-size": 0.01,
-        "--inputs": ["a.bag"],
-        "--bins": 8,
-    }
+    write_config(tmp_path / "c.yaml", config, {"inputs": {"inputs": ["a.bag"]}})
+    data = read_config_file(tmp_path / "c.yaml")
+    assert data["inputs"] == {"inputs": ["a.bag"]}
+    assert config_from_dict({k: v for k, v in data.items() if k != "inputs"}) == config
+    settings, other = file_settings(data, tmp_path / "c.yaml")
+    assert settings["refine.bins"] == 8 and settings["preprocess.odometry.knn"] == 12
+    assert other["inputs"] == {"inputs": ["a.bag"]}
     (tmp_path / "twice.yaml").write_text("bins: 3\ncalibrate:\n  bins: 4\n")
     with pytest.raises(ValueError, match="given twice"):
-        load_config(tmp_path / "twice.yaml")
+        file_settings(read_config_file(tmp_path / "twice.yaml"), tmp_path / "twice.yaml")
 
 
 def test_run_points_form_and_quiet(inputs, tmp_path, capsys):
@@ -200,7 +210,7 @@ def test_run_points_form_and_quiet(inputs, tmp_path, capsys):
     assert main([*argv, "--until", "preprocess", "-q"]) == 0
     captured = capsys.readouterr()
     assert captured.out == "" and captured.err == ""
-    assert read_calib_json(work / "calib.json").nbcalib["config"]["preprocess"]["points"]
+    assert read_calib_json(work / "calib.json").nbcalib["inputs"]["points"]
 
 
 def test_run_user_errors(inputs, tmp_path, capsys):
@@ -218,7 +228,8 @@ def test_run_user_errors(inputs, tmp_path, capsys):
     [
         (["find-matches"], "run 'nbcalib preprocess' first"),
         (["initial-guess"], "run 'nbcalib preprocess' first"),
-        (["calibrate"], "run nbcalib preprocess first"),
+        (["calibrate"], "run 'nbcalib preprocess' first"),
+        (["report"], "run 'nbcalib preprocess' first"),
         (["evaluate", "--ground-truth", "gt.json"], "run 'nbcalib preprocess' first"),
     ],
 )
@@ -234,7 +245,7 @@ def test_stages_name_the_stage_to_run_first_after_preprocess(finished, tmp_path,
     calib = read_calib_json(work / "calib.json")
     calib.results.clear()
     (work / "calib.json").write_text(json.dumps(calib.to_dict()))
-    matches = list(work.glob("*_matches.json"))
+    matches = [*work.glob("*_matches.json"), *work.glob("*_correspondences.json")]
     assert matches  # the finished run wrote them: removing them is what this test is about
     for path in matches:
         path.unlink()

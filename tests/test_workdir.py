@@ -10,18 +10,21 @@ import pytest
 
 from nbcalib.camera import create_camera
 from nbcalib.errors import InputError
+from nbcalib.io.index_map import (
+    decode_index_map,
+    encode_index_map,
+    read_index_map,
+    write_index_map,
+)
 from nbcalib.preprocess.intensity import equalize_image, equalize_point_intensities
 from nbcalib.preprocess.lidar_image import make_virtual_camera, render_lidar_image
+from nbcalib.products import PairData, VirtualCamera
 from nbcalib.workdir import (
     PLAIN_FILES_NAME,
     WorkDir,
-    decode_index_map,
-    encode_index_map,
     get_virtual_camera,
     make_calib,
-    read_index_map,
     set_virtual_camera,
-    write_index_map,
 )
 
 INT32_MAX = np.iinfo(np.int32).max
@@ -103,16 +106,10 @@ def _write_job(workdir: WorkDir, rng, names):
         points, intensities = _scene(rng)
         image = equalize_image(rng.integers(0, 120, size=(480, 640), dtype=np.uint8))
         lidar_image = render_lidar_image(vcam, T_vcam_lidar, points, intensities)
-        workdir.write_pair(
-            name,
-            image=image,
-            points_lidar=points,
-            intensities=intensities,
-            lidar_image=lidar_image,
-        )
+        workdir.write_pair(PairData(name, image, points, intensities, lidar_image))
         written[name] = (image, points, intensities, lidar_image)
     calib = make_calib(camera, list(names), data_path="/data/in")
-    set_virtual_camera(calib, vcam, T_vcam_lidar)
+    set_virtual_camera(calib, VirtualCamera(vcam, T_vcam_lidar))
     calib.set_T_camera_lidar("init_T_lidar_camera_auto", T_vcam_lidar)
     workdir.write_calib(calib)
     return camera, vcam, T_vcam_lidar, written
@@ -130,8 +127,8 @@ def test_work_directory_round_trip(rng, tmp_path):
     calib = workdir.read_calib()
     assert calib.camera_model() == camera
     assert calib.meta["bag_names"] == names and calib.meta["image_topic"] == "N/A"
-    got_vcam, got_T = get_virtual_camera(calib)
-    assert got_vcam == vcam and np.array_equal(got_T, T_vcam_lidar)
+    got = get_virtual_camera(calib)
+    assert got.camera == vcam and np.array_equal(got.T_vcam_lidar, T_vcam_lidar)
     for name in names:
         image, points, intensities, lidar_image = written[name]
         pair = workdir.load_pair(name)
@@ -139,13 +136,13 @@ def test_work_directory_round_trip(rng, tmp_path):
         assert np.array_equal(pair.image, image)
         assert np.array_equal(pair.points_lidar, points.astype(np.float32))
         assert np.array_equal(pair.intensities, intensities.astype(np.float32))
-        assert np.array_equal(pair.lidar_intensity, lidar_image.intensity)
+        assert np.array_equal(pair.lidar_image.intensity, lidar_image.intensity)
         assert np.array_equal(pair.lidar_index, lidar_image.index)
         # the index map points at the .ply vertices that were rendered
         filled = pair.lidar_index >= 0
         assert filled.sum() > 100
         expected = np.rint(255 * pair.intensities[pair.lidar_index[filled]])
-        assert np.array_equal(pair.lidar_intensity[filled], expected.astype(np.uint8))
+        assert np.array_equal(pair.lidar_image.intensity[filled], expected.astype(np.uint8))
 
 
 def test_names_without_calib_come_from_the_clouds(rng, tmp_path):
@@ -155,11 +152,13 @@ def test_names_without_calib_come_from_the_clouds(rng, tmp_path):
     vcam, T = make_virtual_camera(1.0, pinhole_size=32)
     for name in ["b", PLAIN_FILES_NAME]:
         workdir.write_pair(
-            name,
-            image=np.zeros((4, 4), np.uint8),
-            points_lidar=points,
-            intensities=intensities,
-            lidar_image=render_lidar_image(vcam, T, points, intensities),
+            PairData(
+                name,
+                np.zeros((4, 4), np.uint8),
+                points,
+                intensities,
+                render_lidar_image(vcam, T, points, intensities),
+            )
         )
     assert workdir.names() == [PLAIN_FILES_NAME, "b"]
     assert not workdir.is_complete()  # no calib.json yet
@@ -187,38 +186,21 @@ def test_write_pair_removes_stale_matches_and_checks_inputs(rng, tmp_path):
     points, intensities = _scene(rng, 100)
     vcam, T = make_virtual_camera(1.0, pinhole_size=32)
     lidar_image = render_lidar_image(vcam, T, points, intensities)
-    workdir.matches_path("a").write_text("{}")
-    workdir.write_pair(
-        "a",
-        image=np.zeros((4, 4), np.uint8),
-        points_lidar=points,
-        intensities=intensities,
-        lidar_image=lidar_image,
-    )
-    assert not workdir.matches_path("a").exists()
+    for path in workdir.match_paths("a"):
+        path.write_text("{}")
+    workdir.write_pair(PairData("a", np.zeros((4, 4), np.uint8), points, intensities, lidar_image))
+    assert not any(path.exists() for path in workdir.match_paths("a"))
     with pytest.raises(ValueError, match="refers to point"):
         workdir.write_pair(
-            "a",
-            image=np.zeros((4, 4), np.uint8),
-            points_lidar=points[:10],
-            intensities=intensities[:10],
-            lidar_image=lidar_image,
+            PairData("a", np.zeros((4, 4), np.uint8), points[:10], intensities[:10], lidar_image)
         )
     with pytest.raises(ValueError, match="uint8"):
         workdir.write_pair(
-            "a",
-            image=np.zeros((4, 4), np.uint16),
-            points_lidar=points,
-            intensities=intensities,
-            lidar_image=lidar_image,
+            PairData("a", np.zeros((4, 4), np.uint16), points, intensities, lidar_image)
         )
     with pytest.raises(ValueError, match="plain file name"):
         workdir.write_pair(
-            "../x",
-            image=np.zeros((4, 4), np.uint8),
-            points_lidar=points,
-            intensities=intensities,
-            lidar_image=lidar_image,
+            PairData("../x", np.zeros((4, 4), np.uint8), points, intensities, lidar_image)
         )
 
 
@@ -258,16 +240,10 @@ def test_kitti_scan_to_a_work_directory(real_data, tmp_path):
     workdir = WorkDir(tmp_path / "kitti")
     workdir.prepare()
     lidar_image = render_lidar_image(vcam, T_vcam_lidar, points, intensities)
-    workdir.write_pair(
-        PLAIN_FILES_NAME,
-        image=image,
-        points_lidar=points,
-        intensities=intensities,
-        lidar_image=lidar_image,
-    )
+    workdir.write_pair(PairData(PLAIN_FILES_NAME, image, points, intensities, lidar_image))
     camera = create_camera("pinhole", [721.5, 721.5, 609.6, 172.9], [], *image.shape[::-1])
     calib = make_calib(camera, [PLAIN_FILES_NAME], data_path=str(frame))
-    set_virtual_camera(calib, vcam, T_vcam_lidar)
+    set_virtual_camera(calib, VirtualCamera(vcam, T_vcam_lidar))
     workdir.write_calib(calib)
     pair = workdir.load_pair(PLAIN_FILES_NAME)
     assert np.array_equal(pair.lidar_index, lidar_image.index)

@@ -1,72 +1,42 @@
-"""Argument definitions shared by several commands (``preprocess`` and ``run``).
+"""Arguments shared by several commands: inputs, poses, verbosity, work directories.
 
-``preprocess`` and ``run`` take the same inputs and preprocessing options; they are defined here
-once, so both commands accept exactly the same spellings, and :func:`copy_stage_options` lets
-``run`` offer every option of the later stages (``find-matches``, ``initial-guess``,
-``calibrate``) without repeating their definitions.
+Settings options (``--voxel-size``, ``--bins``...) live in :mod:`nbcalib.commands._options`,
+mapped onto the config tree; this module holds what is not a setting.
 """
 
 from __future__ import annotations
 
 import argparse
-import copy
+from pathlib import Path
+
+from nbcalib.errors import InputError
 
 __all__ = [
     "add_input_arguments",
-    "add_preprocess_arguments",
     "add_verbosity_arguments",
-    "copy_stage_options",
+    "input_spec",
+    "parse_pose",
+    "split_workdir",
+    "stage_calibrator",
     "stage_parser",
-    "suppress_defaults",
 ]
 
 
 def add_input_arguments(parser: argparse.ArgumentParser) -> None:
-    """Positional ``INPUT... WORKDIR`` and ``--points FILE... --image FILE``."""
+    """Positional ``INPUT... WORKDIR``, ``--points FILE... --image FILE`` and the camera."""
+    from nbcalib.commands._options import INPUT_OPTIONS, add_options
+
     parser.add_argument(
-        "inputs", nargs="*", metavar="INPUT... WORKDIR", help="inputs, then WORKDIR"
+        "inputs",
+        nargs="*",
+        metavar="INPUT",
+        help="bags, or point cloud files and one image; the last argument is WORKDIR",
     )
     parser.add_argument(
         "--points", nargs="+", metavar="FILE", help="point cloud files, in time order"
     )
     parser.add_argument("--image", metavar="FILE", help="camera image for --points")
-
-
-def add_preprocess_arguments(parser: argparse.ArgumentParser) -> list[argparse.Action]:
-    """The options of ``preprocess`` (integration mode, camera, topics, dense cloud).
-
-    Returns
-    -------
-    list of argparse.Action
-        The actions added, so that a caller can change their defaults
-        (:func:`suppress_defaults`).
-    """
-    before = len(parser._actions)
-    mode = parser.add_mutually_exclusive_group()
-    mode.add_argument("--dynamic", action="store_true", help="moving spinning LiDAR (CT-ICP)")
-    mode.add_argument("--static", action="store_true", help="LiDAR at rest (accumulate)")
-    cam = parser.add_argument_group("camera (default: the bag's CameraInfo)")
-    cam.add_argument("--camera", metavar="FILE", help="camera file")
-    cam.add_argument("--camera-model", metavar="M", help="pinhole, plumb_bob, fisheye, ...")
-    cam.add_argument("--intrinsics", metavar="A,B,...", help="fx,fy,cx,cy[,xi]")
-    cam.add_argument("--distortion", metavar="A,B,...", help="distortion coefficients")
-    topics = parser.add_argument_group("bag topics (default: the only one of each kind)")
-    topics.add_argument("--points-topic", metavar="T")
-    topics.add_argument("--image-topic", metavar="T")
-    topics.add_argument("--camera-info-topic", metavar="T")
-    parser.add_argument(
-        "--intensity-channel", default="auto", help="'auto': reflectivity > intensity"
-    )
-    parser.add_argument("--voxel-size", type=float, default=0.002, help="dense cloud voxel, metres")
-    parser.add_argument(
-        "--min-distance", type=float, default=1.0, help="drop nearer points, metres"
-    )
-    parser.add_argument(
-        "--frame-rate", type=float, default=10.0, help="for files without times, Hz"
-    )
-    parser.add_argument("--max-scans", type=int, default=None, help="use at most N scans per pair")
-    parser.add_argument("--no-equalize", action="store_true", help="keep raw intensities and image")
-    return parser._actions[before:]
+    add_options(parser.add_argument_group("camera (default: the bag's CameraInfo)"), INPUT_OPTIONS)
 
 
 def add_verbosity_arguments(group) -> None:
@@ -88,58 +58,86 @@ def add_verbosity_arguments(group) -> None:
     )
 
 
-def suppress_defaults(actions) -> None:
-    """Leave options out of the namespace unless given; name the default in their help instead.
-
-    ``run`` merges three sources (command line over config file over each stage's defaults) and
-    has to know which options the user gave; an option with ``argparse.SUPPRESS`` as default is
-    absent from the namespace unless given.
-    """
-    for action in actions:
-        if action.default is argparse.SUPPRESS:
-            continue
-        if action.default not in (None, False) and action.help:
-            action.help = f"{action.help} (default: {action.default})"
-        action.default = argparse.SUPPRESS
-
-
 def stage_parser(module, formatter_class=argparse.HelpFormatter) -> argparse.ArgumentParser:
     """The parser of one command module (``add_parser(subparsers, formatter_class)``)."""
     scratch = argparse.ArgumentParser(add_help=False)
     return module.add_parser(scratch.add_subparsers(), formatter_class=formatter_class)
 
 
-def copy_stage_options(
-    parser: argparse.ArgumentParser, module, title: str, *, skip=()
-) -> list[argparse.Action]:
-    """Add the optional arguments of a command module's parser to ``parser``, as a group.
+def split_workdir(inputs, points) -> tuple[list[str], list[str], str]:
+    """``INPUT... WORKDIR`` -> (inputs, points, workdir).
 
-    Parameters
-    ----------
-    parser : argparse.ArgumentParser
-        Receives copies of the options.
-    module : module
-        A command module (``add_parser``).
-    title : str
-        Title of the argument group in ``--help``.
-    skip : iterable of str
-        Option strings not to copy (e.g. ``--force``, which means something else in ``run``);
-        options whose strings ``parser`` already has are skipped as well.
+    ``--points a.pcd b.pcd WORKDIR`` with no positional left: the last ``--points`` entry is
+    WORKDIR (argparse cannot tell).
 
-    Returns
-    -------
-    list of argparse.Action
-        The copies, defaults untouched.
+    Raises
+    ------
+    InputError
+        No WORKDIR, or a WORKDIR that names a data file.
     """
-    taken = set(parser._option_string_actions) | set(skip)
-    group = parser.add_argument_group(title)
-    copies = []
-    for action in stage_parser(module)._actions:
-        if not action.option_strings or isinstance(action, argparse._HelpAction):
-            continue
-        if taken & set(action.option_strings):
-            continue
-        clone = copy.copy(action)
-        group._add_action(clone)
-        copies.append(clone)
-    return copies
+    from nbcalib.preprocess.inputs import CLOUD_SUFFIXES
+
+    inputs, points = [str(p) for p in inputs or []], [str(p) for p in points or []]
+    if not inputs and len(points) > 1 and Path(points[-1]).suffix.lower() not in CLOUD_SUFFIXES:
+        inputs = [points.pop()]
+    if not inputs:
+        raise InputError("WORKDIR missing: give the work directory as the last argument")
+    workdir = inputs.pop()
+    if Path(workdir).suffix.lower() in (*CLOUD_SUFFIXES, ".png", ".jpg", ".bag"):
+        raise InputError(f"the last argument must be WORKDIR, a folder, not the file {workdir}")
+    return inputs, points, workdir
+
+
+def input_spec(args: argparse.Namespace, inputs, points, *, recorded: dict | None = None):
+    """The :class:`~nbcalib.preprocess.inputs.InputSpec` of a command line.
+
+    With no input given, the inputs a work directory recorded (``recorded``) are used, with the
+    camera options given now laid over them.
+    """
+    from nbcalib.preprocess.inputs import InputSpec
+
+    given = {
+        key: getattr(args, key)
+        for key in ("image", "camera", "camera_model", "intrinsics", "distortion")
+        if getattr(args, key, None) is not None
+    }
+    if not inputs and not points and recorded:
+        base = InputSpec.from_dict(recorded).to_dict()
+        return InputSpec.from_dict({**base, **given})
+    return InputSpec(inputs=tuple(inputs), points=tuple(points), **given)
+
+
+def parse_pose(text: str, option: str):
+    """``x,y,z,qx,qy,qz,qw`` (``T_lidar_camera``, the calib.json layout) as a pipeline Start."""
+    from nbcalib.products import Start
+
+    try:
+        values = [float(v) for v in str(text).split(",")]
+    except ValueError:
+        raise InputError(f"{option} must be 7 numbers x,y,z,qx,qy,qz,qw, got {text!r}") from None
+    if len(values) != 7:
+        raise InputError(f"{option} must be 7 numbers x,y,z,qx,qy,qz,qw, got {len(values)}")
+    return Start.from_values(values, option)
+
+
+def stage_calibrator(args: argparse.Namespace):
+    """The :class:`~nbcalib.pipeline.Calibrator` of a stage command on a preprocessed WORKDIR.
+
+    Its config is the one the work directory recorded, with the options given now over it, so a
+    stage run by hand uses the job's settings (and ``nbcalib run`` can keep what it made).
+    """
+    from nbcalib.commands._options import build_config
+    from nbcalib.config import config_from_record
+    from nbcalib.pipeline import Calibrator
+    from nbcalib.workdir import WorkDir
+
+    work = WorkDir(args.workdir)
+    calib = work.require_preprocessed()
+    model_dir = getattr(args, "model_dir", None) or (calib.nbcalib.get("run") or {}).get(
+        "model_dir"
+    )
+    return Calibrator(
+        build_config(args, base=config_from_record(calib.nbcalib.get("config"))),
+        workdir=work,
+        model_dir=model_dir,
+    )

@@ -1,14 +1,14 @@
 """``nbcalib demo [WORKDIR]``: a seeded synthetic scene through every stage, judged against truth.
 
 1. ``nbcalib synth`` makes a small scene with a known extrinsic (``WORKDIR/synth``);
-2. ``nbcalib run --until initial-guess`` preprocesses it into ``WORKDIR/work`` and estimates the
-   initial guess with the best matcher installed (a learned one once exported, else SIFT);
+2. the pipeline (:class:`nbcalib.pipeline.Calibrator`, as ``nbcalib run``) preprocesses it into
+   ``WORKDIR/work`` and estimates the initial guess with the best matcher installed (a learned
+   one once exported, else SIFT);
 3. the guess is compared with the truth: when it is outside the reach of fine registration (or
    failed), the demo says so and starts fine registration from the ground truth perturbed by a
    fixed, seeded offset instead, so that the rest of the pipeline can still be shown;
-4. ``nbcalib run --from calibrate`` refines (and reports when :mod:`nbcalib.report` is
-   installed); the errors are printed as ``nbcalib evaluate`` prints them, with the synthetic
-   targets and whether they are met.
+4. the same pipeline refines and reports; the errors are printed as ``nbcalib evaluate`` prints
+   them, with the synthetic targets and whether they are met.
 """
 
 from __future__ import annotations
@@ -105,22 +105,17 @@ def _call(module, argv: list[str]) -> int:
     return int(module.run(stage_parser(module).parse_args(argv)) or 0)
 
 
-def _errors(work: Path, stage: str | None, T_true):
-    from nbcalib.io.calib_json import read_calib_json
+def _errors(T_camera_lidar, T_true):
     from nbcalib.metrics import pose_errors
 
-    calib = read_calib_json(work / "calib.json")
-    stage = stage or calib.latest_stage()
-    if stage is None or not calib.has_result(stage):
-        return None
-    return pose_errors(calib.get_T_camera_lidar(stage), T_true)
+    return None if T_camera_lidar is None else pose_errors(T_camera_lidar, T_true)
 
 
-def _perturbed_truth(T_camera_lidar, seed: int) -> list[float]:
-    """The truth moved by :data:`PERTURBATION` in seeded random directions, as ``--init``."""
+def _perturbed_truth(T_camera_lidar, seed: int):
+    """The truth moved by :data:`PERTURBATION` in seeded random directions, as a Start."""
     import numpy as np
 
-    from nbcalib.io.calib_json import values_from_T_camera_lidar
+    from nbcalib.products import Start
     from nbcalib.transforms import se3_exp
 
     rng = np.random.default_rng(seed)
@@ -129,25 +124,46 @@ def _perturbed_truth(T_camera_lidar, seed: int) -> list[float]:
     xi = np.concatenate(
         [PERTURBATION[0] * directions[0], math.radians(PERTURBATION[1]) * directions[1]]
     )
-    return values_from_T_camera_lidar(se3_exp(xi) @ T_camera_lidar)
+    return Start.from_matrix(se3_exp(xi) @ T_camera_lidar, "perturbed ground truth")
+
+
+def demo_inputs(data: Path, pairs: int):
+    """The :class:`~nbcalib.preprocess.inputs.InputSpec` of a synthetic folder, as typed by hand.
+
+    One pair is plain files (``pair_000_scans/*.pcd`` or ``pair_000.pcd``, and its PNG); more
+    pairs are ROS 2 bags (read without ROS).
+    """
+    from nbcalib.preprocess.inputs import InputSpec
+
+    if pairs == 1:
+        scans = sorted(str(p) for p in (data / "pair_000_scans").glob("*.pcd"))
+        scans = scans or [str(data / "pair_000.pcd")]
+        inputs = [*scans, str(data / "pair_000.png")]
+    else:
+        inputs = sorted(str(p) for p in data.glob("pair_*") if p.is_dir())
+    return InputSpec(inputs=tuple(inputs), camera=str(data / "camera.yaml"))
 
 
 def run(args: argparse.Namespace) -> int:
     """Synthesise, calibrate, print the errors; returns 0 (the errors are printed, not judged)."""
     from nbcalib.commands import evaluate, synth
-    from nbcalib.commands import run as run_command
+    from nbcalib.config import CalibrationConfig, set_values
     from nbcalib.errors import InputError
     from nbcalib.io.calib_json import read_ground_truth
     from nbcalib.matching.match import available_matchers, resolve_matcher
+    from nbcalib.pipeline import Calibrator
 
     start = time.perf_counter()
     cpu_start = time.process_time()
     root = Path(args.workdir)
+    if root.exists() and not root.is_dir():
+        raise InputError("exists and is not a folder: give a folder for the demo", root)
     data, work = root / "synth", root / "work"
     model_dir = getattr(args, "model_dir", None)
-    quiet = ["-q"] if getattr(args, "quiet", False) else []
     matcher = resolve_matcher(args.matcher, model_dir)
     learned = [m for m in available_matchers(model_dir) if m != "sift"]
+    if args.pairs < 1:
+        raise InputError(f"--pairs must be >= 1, got {args.pairs}")
     print(
         f"nbcalib demo: {args.lidar} + {args.camera}, {args.pairs} pair(s), seed {args.seed}, "
         f"matcher {matcher}"
@@ -156,26 +172,22 @@ def run(args: argparse.Namespace) -> int:
     # 1. a scene with a known answer
     scene = ["--lidar", args.lidar, "--camera", args.camera, "--seed", str(args.seed)]
     scene += ["--image-size", args.image_size, "--duration", str(args.duration)]
-    if args.pairs < 1:
-        raise InputError(f"--pairs must be >= 1, got {args.pairs}")
     # plain files hold one pair; several pairs go through ROS 2 bags (read without ROS)
     scene += ["--pairs", str(args.pairs), "--format", "files" if args.pairs == 1 else "bag2"]
     _call(synth, [str(data), *scene])
     T_true = read_ground_truth(data / "ground_truth.json")
-    if args.pairs == 1:
-        inputs = [*sorted(str(p) for p in data.glob("pair_*.pcd")), str(data / "pair_000.png")]
-    else:
-        inputs = sorted(str(p) for p in data.glob("pair_*") if p.is_dir())
-    common = ["--camera", str(data / "camera.yaml"), "--voxel-size", str(args.voxel_size)]
-    common += ["--matcher", matcher, *quiet]
-    if model_dir is not None:
-        common += ["--model-dir", str(model_dir)]
+    spec = demo_inputs(data, args.pairs)
+    config = set_values(
+        CalibrationConfig(),
+        {"preprocess.voxel_size": args.voxel_size, "matching.matcher": matcher},
+    )
+    calibrator = Calibrator(config, workdir=work, model_dir=model_dir)
 
     # 2. preprocessing and the automatic initial guess
     guess_error = None
     try:
-        _call(run_command, [*inputs, str(work), *common, "--force", "--until", "initial-guess"])
-        guess_error = _errors(work, None, T_true)
+        calibrator.run(spec, until="initial-guess", redo_from="preprocess")
+        guess_error = _errors(calibrator.start.T_camera_lidar, T_true)
     except InputError as exc:
         print(f"the automatic initial guess failed: {exc}")
     if guess_error is not None:
@@ -189,9 +201,9 @@ def run(args: argparse.Namespace) -> int:
     )
 
     # 3. fine registration, from the guess or, honestly labelled, from a perturbed truth
-    finish = [str(work), *common, "--from", "calibrate"]
+    init = None
     if not usable:
-        init = ",".join(f"{v:.9f}" for v in _perturbed_truth(T_true, args.seed))
+        init = _perturbed_truth(T_true, args.seed)
         print(
             f"the initial guess is not usable (outside {100 * REACH_TRANSLATION_M:.0f} cm / "
             f"{REACH_ROTATION_DEG:g} deg): fine registration starts instead from the GROUND "
@@ -203,13 +215,12 @@ def run(args: argparse.Namespace) -> int:
                 "  No learned matcher is installed (SIFT rarely matches across the camera/LiDAR "
                 "gap): run 'nbcalib models export' once for the automatic guess."
             )
-        finish += ["--no-matching", f"--init={init}"]
-    _call(run_command, finish)
+    result = calibrator.run(spec, init=init)
 
     # 4. the answer against the truth
     print("error against the ground truth (nbcalib evaluate):")
     _call(evaluate, [str(work), "--ground-truth", str(data / "ground_truth.json")])
-    final = _errors(work, "T_lidar_camera", T_true)
+    final = _errors(result.T_camera_lidar, T_true)
     met = (
         final["translation_error_m"] <= TARGET_TRANSLATION_M
         and final["rotation_error_deg"] <= TARGET_ROTATION_DEG
@@ -221,19 +232,19 @@ def run(args: argparse.Namespace) -> int:
         f"{TARGET_ROTATION_DEG} deg)"
         + ("" if usable else "; started from a perturbed ground truth, not from a guess")
     )
-    _print_report_location(work)
+    if result.quality is not None:
+        print(f"quality report: verdict {result.quality.verdict}, {work / 'report' / 'index.html'}")
+    times = ", ".join(f"{stage} {t:.1f} s" for stage, t in calibrator.seconds.items())
     print(
         f"demo finished in {time.perf_counter() - start:.1f} s "
-        f"({time.process_time() - cpu_start:.1f} s CPU); files in {root}"
+        f"({time.process_time() - cpu_start:.1f} s CPU; {times}); files in {root}"
     )
-    summary = {"initial_guess": guess_error, "final": final, "guess_usable": usable}
+    summary = {
+        "initial_guess": guess_error,
+        "final": final,
+        "guess_usable": usable,
+        "start_T_lidar_camera": None if init is None else list(init.values),
+        "T_lidar_camera": result.xyz_quat,
+    }
     (root / "demo_summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     return 0
-
-
-def _print_report_location(work: Path) -> None:
-    html = work / "report" / "index.html"
-    if html.is_file():
-        print(f"report: {html}")
-    else:
-        print("no report: this version of nbcalib has no 'nbcalib report'")

@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import argparse
 
-from nbcalib.commands._args import add_input_arguments, add_preprocess_arguments
+from nbcalib.commands._args import add_input_arguments, input_spec, split_workdir
+from nbcalib.errors import InputError
 
 DESCRIPTION = """\
 Turn LiDAR-camera recordings into a work directory: each bag (or the set of plain point-cloud
@@ -32,6 +33,8 @@ examples:
 
 def add_parser(subparsers, formatter_class) -> argparse.ArgumentParser:
     """Register ``preprocess``."""
+    from nbcalib.commands._options import PREPROCESS, add_options
+
     p = subparsers.add_parser(
         "preprocess",
         help="bags or plain files -> work directory (dense clouds, LiDAR images)",
@@ -40,106 +43,26 @@ def add_parser(subparsers, formatter_class) -> argparse.ArgumentParser:
         formatter_class=formatter_class,
     )
     add_input_arguments(p)
-    add_preprocess_arguments(p)
+    add_options(p.add_argument_group("preprocessing"), PREPROCESS)
     return p
 
 
-def _numbers(text: str | None, option: str) -> list[float]:
-    from nbcalib.errors import InputError
-
-    if text is None or text.strip() == "":
-        return []
-    try:
-        return [float(v) for v in text.split(",")]
-    except ValueError:
-        raise InputError(f"{option} must be comma-separated numbers, got {text!r}") from None
-
-
-def _camera_from_args(args, image_shape):
-    from nbcalib.camera import canonical_model_name, create_camera
-    from nbcalib.errors import InputError
-    from nbcalib.io.camera_file import load_camera
-
-    height, width = image_shape[:2] if image_shape is not None else (None, None)
-    if args.camera:
-        return load_camera(args.camera, width=width, height=height)
-    if not args.camera_model:
-        if args.intrinsics or args.distortion:
-            raise InputError("--intrinsics/--distortion need --camera-model")
-        return None
-    if width is None:
-        raise InputError("--camera-model needs an image to take the size from")
-    try:
-        model = canonical_model_name(args.camera_model)
-        intrinsics = _numbers(args.intrinsics, "--intrinsics")
-        if model == "equirectangular" and not intrinsics:
-            intrinsics = [width, height]  # as the reference: the image size
-        return create_camera(
-            model, intrinsics, _numbers(args.distortion, "--distortion"), width, height
-        )
-    except ValueError as exc:
-        raise InputError(str(exc)) from None
-
-
 def run(args) -> int:
-    """Gather inputs, preprocess, print a summary."""
-    from pathlib import Path
+    """Gather the inputs, preprocess them into WORKDIR, print a summary."""
+    from nbcalib.commands._options import build_config
+    from nbcalib.pipeline import Calibrator
 
-    from nbcalib.errors import InputError
-    from nbcalib.preprocess.pipeline import (
-        CLOUD_SUFFIXES,
-        PreprocessConfig,
-        classify_inputs,
-        gather_bag,
-        gather_files,
-        preprocess,
-    )
-
-    inputs = list(args.inputs)
-    points = list(args.points or [])
-    # `--points a.pcd b.pcd WORKDIR` with no positional left: the last --points entry is WORKDIR
-    if not inputs and points and Path(points[-1]).suffix.lower() not in CLOUD_SUFFIXES:
-        inputs = [points.pop()]
-    if not inputs:
-        raise InputError("WORKDIR missing: give the output folder as the last argument")
-    workdir = inputs.pop()
-    if Path(workdir).suffix.lower() in (*CLOUD_SUFFIXES, ".png", ".jpg", ".bag"):
-        raise InputError(f"the last argument must be WORKDIR, a folder, not the file {workdir}")
-    bags, clouds, images = classify_inputs(inputs)
-    clouds += [Path(p) for p in points]
-    if args.image:
-        images.append(Path(args.image))
-    config = PreprocessConfig(
-        mode="dynamic" if args.dynamic else "static" if args.static else "auto",
-        voxel_size=args.voxel_size,
-        min_distance=args.min_distance,
-        frame_rate=args.frame_rate,
-        equalize_intensities=not args.no_equalize,
-        equalize_image=not args.no_equalize,
-        intensity_channel=args.intensity_channel,
-        points_topic=args.points_topic,
-        image_topic=args.image_topic,
-        camera_info_topic=args.camera_info_topic,
-        max_scans=args.max_scans,
-    )
-    if bags and (clouds or images):
-        raise InputError("give either bags or plain files (point clouds + image), not both")
-    if bags:
-        pairs = [gather_bag(b, config) for b in sorted(bags, key=lambda p: p.name)]
-        data_path = str(Path(bags[0]).resolve().parent)
-    else:
-        if len(images) != 1:
-            raise InputError(
-                f"plain files need exactly one image (.png/.jpg), got {len(images)}"
-                + ("" if images else "; add --image FILE")
-            )
-        pairs = [gather_files(clouds, images[0], config)]
-        data_path = str(Path(clouds[0]).resolve().parent) if clouds else ""
-    camera = _camera_from_args(args, pairs[0].image.shape)
-    summary = preprocess(pairs, workdir, camera=camera, config=config, data_path=data_path)
-    total = sum(p["points"] for p in summary["pairs"].values())
+    inputs, points, workdir = split_workdir(args.inputs, args.points)
+    spec = input_spec(args, inputs, points)
+    if spec.empty:
+        raise InputError(
+            "nothing to preprocess: give INPUT... WORKDIR (or --points FILE --image FILE)"
+        )
+    calibrator = Calibrator(build_config(args), workdir=workdir)
+    calibrator.run(spec, only="preprocess")
+    total = sum(len(p) for p in calibrator.pairs)
     print(
-        f"wrote {workdir}: {len(summary['pairs'])} pair(s), {total} points, "
-        f"LiDAR FoV {summary['lidar_fov_deg']:.1f} deg, {summary['seconds']:.1f} s"
+        f"wrote {workdir}: {len(calibrator.pairs)} pair(s), {total} points, "
+        f"LiDAR FoV {calibrator.virtual.fov_deg:.1f} deg, {calibrator.seconds['preprocess']:.1f} s"
     )
     return 0

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import argparse
-import sys
 
 DESCRIPTION = """\
 Judge the calibration of a work directory and write WORKDIR/report/index.html: LiDAR points on
@@ -28,6 +27,8 @@ SUSPECT_STATUS = 3
 
 def add_parser(subparsers, formatter_class=argparse.HelpFormatter) -> argparse.ArgumentParser:
     """Register ``report``."""
+    from nbcalib.commands._options import ASSESS, add_options
+
     p = subparsers.add_parser(
         "report",
         help="quality report: overlays, NID curves, uncertainty, verdict (HTML)",
@@ -36,9 +37,7 @@ def add_parser(subparsers, formatter_class=argparse.HelpFormatter) -> argparse.A
         formatter_class=formatter_class,
     )
     p.add_argument("workdir", metavar="WORKDIR", help="work directory after nbcalib calibrate")
-    p.add_argument(
-        "--confidence", type=float, default=0.95, help="confidence of the stated intervals"
-    )
+    add_options(p, ASSESS)
     p.add_argument(
         "--strict", action="store_true", help=f"exit {SUSPECT_STATUS} when the verdict is suspect"
     )
@@ -47,19 +46,11 @@ def add_parser(subparsers, formatter_class=argparse.HelpFormatter) -> argparse.A
 
 def run(args) -> int:
     """Write the report and print the verdict."""
-    from nbcalib.errors import InputError
-    from nbcalib.report.html import make_report
-    from nbcalib.report.quality import AssessConfig
+    from nbcalib.commands._args import stage_calibrator
 
-    if not 0.0 < args.confidence < 1.0:
-        raise InputError(f"--confidence must be in (0, 1), got {args.confidence}")
-
-    def progress(done, total, what):
-        print(f"  [{done}/{total}] {what}", file=sys.stderr)
-
-    report = make_report(
-        args.workdir, progress=progress, assess_config=AssessConfig(confidence=args.confidence)
-    )
+    calibrator = stage_calibrator(args)
+    calibrator.run(only="report")
+    report = calibrator.report
     u = report.uncertainty
     print(
         f"verdict: {report.verdict}"

@@ -1,13 +1,12 @@
 """The initial guess of ``T_camera_lidar`` from 2D-3D correspondences (paper section III-D).
 
-- :mod:`~nbcalib.initial_guess.correspondences`: keypoint matches lifted to 3-D points through
-  the LiDAR index map, pooled over pairs;
+The correspondences come from matching (:mod:`nbcalib.matching`) or from hand-picked pairs.
+
+- :mod:`~nbcalib.initial_guess.config`: :class:`InitialGuessConfig`, the stage's settings;
 - :mod:`~nbcalib.initial_guess.ransac`: rotation-only RANSAC (Algorithm 1), numba, parallel and
   deterministic for a seed;
 - :mod:`~nbcalib.initial_guess.lm`: Levenberg-Marquardt with a Cauchy kernel on the
   reprojection error (Eq. 1), analytic Jacobians;
-- :mod:`~nbcalib.initial_guess.multiview`: matches against camera-shaped LiDAR views at several
-  headings (or around a prior), the view with the best RANSAC support kept;
 - :mod:`~nbcalib.initial_guess.estimate`: both together, a polish of the winner (translation
   RANSAC, inlier refits), with inliers, RMS and a success flag;
 - :mod:`~nbcalib.initial_guess.manual` and :mod:`~nbcalib.initial_guess.picker`: hand-picked
@@ -27,67 +26,41 @@ Example
 (True, 100)
 """
 
-from nbcalib.initial_guess.correspondences import (
-    Correspondences,
-    correspondences_from_matches,
-    lift_lidar_pixels,
-    lift_matches,
-    pool_correspondences,
-)
-from nbcalib.initial_guess.estimate import (
-    MIN_CORRESPONDENCES,
-    InitialGuess,
-    estimate_initial_guess,
-    translation_from_bearings,
-    translation_ransac,
-)
-from nbcalib.initial_guess.lm import (
-    LMResult,
-    cauchy_loss,
-    refine_pose_lm,
-    reprojection_errors,
-    reprojection_residuals,
-)
-from nbcalib.initial_guess.manual import (
-    ManualCorrespondence,
-    read_manual_correspondences,
-    resolve_manual_correspondences,
-    write_manual_correspondences,
-)
-from nbcalib.initial_guess.multiview import MultiViewMatches, ViewMatches, match_views
-from nbcalib.initial_guess.ransac import (
-    RotationRansacResult,
-    estimate_rotation_ransac,
-    usable_correspondences,
-)
-from nbcalib.initial_guess.synthetic import SyntheticCorrespondences, synthetic_correspondences
+from __future__ import annotations
 
-__all__ = [
-    "MIN_CORRESPONDENCES",
-    "Correspondences",
-    "InitialGuess",
-    "LMResult",
-    "ManualCorrespondence",
-    "MultiViewMatches",
-    "RotationRansacResult",
-    "SyntheticCorrespondences",
-    "ViewMatches",
-    "cauchy_loss",
-    "correspondences_from_matches",
-    "estimate_initial_guess",
-    "estimate_rotation_ransac",
-    "lift_lidar_pixels",
-    "lift_matches",
-    "match_views",
-    "pool_correspondences",
-    "read_manual_correspondences",
-    "refine_pose_lm",
-    "reprojection_errors",
-    "reprojection_residuals",
-    "resolve_manual_correspondences",
-    "synthetic_correspondences",
-    "translation_from_bearings",
-    "translation_ransac",
-    "usable_correspondences",
-    "write_manual_correspondences",
-]
+import importlib
+
+_EXPORTS = {
+    "InitialGuessConfig": "config",
+    "MIN_CORRESPONDENCES": "estimate",
+    "InitialGuess": "estimate",
+    "estimate_initial_guess": "estimate",
+    "translation_from_bearings": "estimate",
+    "translation_ransac": "estimate",
+    "LMResult": "lm",
+    "cauchy_loss": "lm",
+    "refine_pose_lm": "lm",
+    "reprojection_errors": "lm",
+    "reprojection_residuals": "lm",
+    "ManualCorrespondence": "manual",
+    "read_manual_correspondences": "manual",
+    "resolve_manual_correspondences": "manual",
+    "write_manual_correspondences": "manual",
+    "RotationRansacResult": "ransac",
+    "estimate_rotation_ransac": "ransac",
+    "usable_correspondences": "ransac",
+    "SyntheticCorrespondences": "synthetic",
+    "synthetic_correspondences": "synthetic",
+}
+
+__all__ = sorted(_EXPORTS)
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        return getattr(importlib.import_module(f"nbcalib.initial_guess.{_EXPORTS[name]}"), name)
+    raise AttributeError(f"module 'nbcalib.initial_guess' has no attribute {name!r}")
+
+
+def __dir__():
+    return __all__

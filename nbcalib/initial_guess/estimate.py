@@ -45,12 +45,13 @@ from __future__ import annotations
 
 import math
 import operator
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from nbcalib.camera import CameraModel
 from nbcalib.errors import InputError
+from nbcalib.initial_guess.config import INITIAL_TRANSLATIONS, InitialGuessConfig
 from nbcalib.initial_guess.lm import LMResult, refine_pose_lm, reprojection_errors
 from nbcalib.initial_guess.ransac import (
     RotationRansacResult,
@@ -67,9 +68,6 @@ __all__ = [
     "translation_from_bearings",
     "translation_ransac",
 ]
-
-#: Start translations of the LM step (module docstring).
-INITIAL_TRANSLATIONS = ("bearing", "zero")
 
 #: Rounds of "fit the inliers, then all" after the first fit (local optimisation).
 _LO_ROUNDS = 3
@@ -389,23 +387,11 @@ def estimate_initial_guess(
     camera: CameraModel,
     uv_camera,
     points_lidar,
+    config: InitialGuessConfig | None = None,
     *,
-    ransac_iterations: int = 8192,
-    ransac_threshold: float = 5.0,
-    robust_kernel_width: float = 10.0,
     seed: int = 0,
     weights=None,
-    min_inliers: int = 10,
-    min_distinctiveness: float = 2.0,
-    candidates: int = 8,
-    local_optimization: bool = True,
-    initial_translation: str = "bearing",
-    max_initial_translation: float = 2.0,
-    max_lm_iterations: int = 100,
-    polish: bool = True,
-    polish_kernel_width: float = 2.0,
-    translation_iterations: int = 1000,
-    parallel: bool = True,
+    **overrides,
 ) -> InitialGuess:
     """Estimate ``T_camera_lidar`` from 2D-3D correspondences (paper section III-D).
 
@@ -429,12 +415,9 @@ def estimate_initial_guess(
         Camera keypoints, pixels (u = column, v = row).
     points_lidar : array_like of shape (M, 3)
         Their 3-D points in the LiDAR frame, metres. Outliers are expected.
-    ransac_iterations : int, optional
-        RANSAC hypotheses.
-    ransac_threshold : float, optional
-        Inlier threshold, pixels (RANSAC and the final inlier count).
-    robust_kernel_width : float, optional
-        Cauchy kernel width of the LM step, pixels.
+    config : InitialGuessConfig, optional
+        RANSAC, LM, polish and success-test settings (its attributes are documented there);
+        default ``InitialGuessConfig()``.
     seed : int, optional
         RANSAC seed; the same seed gives the same result.
     weights : array_like of shape (M,), optional
@@ -442,33 +425,9 @@ def estimate_initial_guess(
         the matcher's confidences (the correct fraction of learned matches rises steeply with
         their confidence; docs/BENCHMARKS.md). Default: all 1, paper Eq. 1. RANSAC and the
         inlier counts do not use them.
-    min_inliers : int, optional
-        Final inliers needed for ``success``.
-    min_distinctiveness : float, optional
-        How many times more correspondences the final pose must explain than the best pose
-        rotated more than :data:`DISTINCT_ROTATION_DEG` from it (module docstring), for
-        ``success`` (0 switches the test off).
-    candidates : int, optional
-        RANSAC hypotheses refined by LM (the near-field parallax that rotation-only RANSAC
-        ignores can make the true rotation only the second or third best).
-    local_optimization : bool, optional
-        Refit on inlier sets before the final fit (see above).
-    initial_translation : {"bearing", "zero"}, optional
-        LM start translation (module docstring).
-    max_initial_translation : float, optional
-        A ``"bearing"`` start translation longer than this (metres) is replaced by zero.
-    max_lm_iterations : int, optional
-        Step limit of each LM run.
-    polish : bool, optional
-        Polish the winner: translation RANSAC, then LM refits of its inliers (module
-        docstring).
-    polish_kernel_width : float, optional
-        Cauchy kernel width of the polish refits, pixels.
-    translation_iterations : int, optional
-        Hypotheses of each translation RANSAC (the polish step's, and the runner-up poses' of
-        the distinctiveness test).
-    parallel : bool, optional
-        Run RANSAC on all threads (same result).
+    **overrides
+        Attributes of :class:`InitialGuessConfig` to change for this call
+        (``ransac_iterations=2000``, ``polish=False``, ...).
 
     Returns
     -------
@@ -479,15 +438,9 @@ def estimate_initial_guess(
     InputError
         Fewer than :data:`MIN_CORRESPONDENCES` usable correspondences.
     """
-    if initial_translation not in INITIAL_TRANSLATIONS:
-        raise ValueError(
-            f"initial_translation must be one of {INITIAL_TRANSLATIONS}, "
-            f"got {initial_translation!r}"
-        )
-    min_inliers = operator.index(min_inliers)
-    candidates = operator.index(candidates)
-    if candidates < 1:
-        raise ValueError(f"candidates must be >= 1, got {candidates}")
+    cfg = replace(config or InitialGuessConfig(), **overrides)
+    min_inliers = operator.index(cfg.min_inliers)
+    ransac_threshold = cfg.ransac_threshold
     bearings_camera, _, usable = usable_correspondences(camera, uv_camera, points_lidar)
     n_usable = int(np.count_nonzero(usable))
     if n_usable < MIN_CORRESPONDENCES:
@@ -506,12 +459,12 @@ def estimate_initial_guess(
         camera,
         uv,
         points,
-        iterations=ransac_iterations,
+        iterations=cfg.ransac_iterations,
         threshold=ransac_threshold,
         seed=seed,
-        parallel=parallel,
+        parallel=cfg.parallel,
     )
-    hypotheses = ransac.ranked_hypotheses(candidates, min_inliers=0)
+    hypotheses = ransac.ranked_hypotheses(cfg.candidates, min_inliers=0)
     # LM on the usable correspondences only: the others have no valid camera ray
     uv_u, points_u, bearings_u = uv[usable], points[usable], bearings_camera[usable]
     best = None
@@ -524,12 +477,12 @@ def estimate_initial_guess(
             bearings_u,
             R,
             support,
-            initial_translation=initial_translation,
-            max_initial_translation=max_initial_translation,
+            initial_translation=cfg.initial_translation,
+            max_initial_translation=cfg.max_initial_translation,
             threshold=ransac_threshold,
-            robust_kernel_width=robust_kernel_width,
-            local_optimization=local_optimization,
-            max_lm_iterations=max_lm_iterations,
+            robust_kernel_width=cfg.robust_kernel_width,
+            local_optimization=cfg.local_optimization,
+            max_lm_iterations=cfg.max_lm_iterations,
             weights=weights[usable],
         )
         key = (int(np.count_nonzero(result.errors < ransac_threshold)), -result.cost)
@@ -543,7 +496,7 @@ def estimate_initial_guess(
     errors = np.full(len(uv), np.inf)
     errors[usable] = refinement.errors
     T_final = refinement.T_camera_lidar
-    if polish:
+    if cfg.polish:
         T_final = _polish(
             camera,
             uv_u,
@@ -552,9 +505,9 @@ def estimate_initial_guess(
             T_final,
             weights[usable],
             threshold=ransac_threshold,
-            width=polish_kernel_width,
+            width=cfg.polish_kernel_width,
             seed=seed,
-            iterations=translation_iterations,
+            iterations=cfg.translation_iterations,
         )
         errors[usable] = reprojection_errors(camera, T_final, uv_u, points_u)[0]
     inliers = errors < ransac_threshold
@@ -563,7 +516,7 @@ def estimate_initial_guess(
     R_final = T_final[:3, :3]
     support = n_inliers
     runner_up = 0
-    if min_distinctiveness > 0:
+    if cfg.min_distinctiveness > 0:
         runner_up = _runner_up(
             camera,
             ransac,
@@ -573,9 +526,9 @@ def estimate_initial_guess(
             bearings_u,
             threshold=ransac_threshold,
             seed=seed,
-            iterations=translation_iterations,
+            iterations=cfg.translation_iterations,
         )
-    distinct = support >= min_distinctiveness * max(runner_up, 1)
+    distinct = support >= cfg.min_distinctiveness * max(runner_up, 1)
     return InitialGuess(
         T_camera_lidar=T_final,
         inliers=inliers,
@@ -590,7 +543,7 @@ def estimate_initial_guess(
         candidate=rank,
         support=support,
         runner_up=runner_up,
-        min_distinctiveness=float(min_distinctiveness),
+        min_distinctiveness=float(cfg.min_distinctiveness),
     )
 
 

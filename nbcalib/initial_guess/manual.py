@@ -16,7 +16,7 @@ u = column, v = row, centres at integers: docs/conventions.md section 6) with ei
 
 - ``lidar_uv``: a pixel of the LiDAR intensity image ``<name>_lidar_intensities.png``, lifted to
   the dense-cloud point it shows through ``<name>_lidar_indices.png`` (the nearest filled pixel
-  within a small radius, as for automatic matches: :mod:`nbcalib.initial_guess.correspondences`),
+  within a small radius, as for automatic matches: :mod:`nbcalib.matching.correspondences`),
   or
 - ``point_lidar``: a 3-D point in the LiDAR frame, metres (picked in a 3-D viewer, or measured).
 
@@ -39,7 +39,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from nbcalib.errors import InputError
-from nbcalib.initial_guess.correspondences import (
+from nbcalib.matching.correspondences import (
     Correspondences,
     lift_lidar_pixels,
     pool_correspondences,
@@ -186,7 +186,7 @@ def write_manual_correspondences(
 
 def resolve_manual_correspondences(
     entries: Sequence[ManualCorrespondence],
-    workdir,
+    pairs,
     *,
     search_radius: float = 2.0,
     path: str | os.PathLike | None = None,
@@ -197,8 +197,8 @@ def resolve_manual_correspondences(
     ----------
     entries : sequence of ManualCorrespondence
         The picks.
-    workdir : nbcalib.workdir.WorkDir or path
-        The work directory (its index maps and clouds lift ``lidar_uv``).
+    pairs : sequence of PairData
+        The job's pairs (their index maps and clouds lift ``lidar_uv``).
     search_radius : float, optional
         Pixels around an empty LiDAR-image pixel searched for a filled one.
     path : str or PathLike, optional
@@ -214,11 +214,8 @@ def resolve_manual_correspondences(
     InputError
         An unknown or missing ``name``, or a LiDAR pixel that shows no point.
     """
-    from nbcalib.workdir import WorkDir
-
-    wd = workdir if isinstance(workdir, WorkDir) else WorkDir(workdir)
-    names = wd.names()
-    loaded: dict[str, tuple[np.ndarray, np.ndarray]] = {}
+    by_name = {pair.name: pair for pair in pairs}
+    names = list(by_name)
     parts = []
     for k, e in enumerate(entries):
         name = e.name
@@ -241,10 +238,7 @@ def resolve_manual_correspondences(
             row = np.array([-1])
             uv_lidar = np.full((1, 2), np.nan)
         else:
-            if name not in loaded:
-                pair = wd.load_pair(name)
-                loaded[name] = (pair.lidar_index, pair.points_lidar)
-            index_map, cloud = loaded[name]
+            index_map, cloud = by_name[name].lidar_index, by_name[name].points_lidar
             uv_lidar = np.array([e.lidar_uv])
             row = lift_lidar_pixels(uv_lidar, index_map, search_radius=search_radius)
             if row[0] < 0:

@@ -27,8 +27,8 @@ from pathlib import Path
 
 import numpy as np
 
-from nbcalib.initial_guess.correspondences import lift_lidar_pixels
 from nbcalib.initial_guess.manual import ManualCorrespondence, write_manual_correspondences
+from nbcalib.matching.correspondences import lift_lidar_pixels
 
 __all__ = ["DEFAULT_FILE_NAME", "ManualPicker", "PickerState"]
 
@@ -47,7 +47,7 @@ class PickerState:
         The pair's LiDAR index map; when given, LiDAR clicks that show no point within
         ``search_radius`` pixels are refused.
     search_radius : float, optional
-        Pixels, see :func:`nbcalib.initial_guess.correspondences.lift_lidar_pixels`.
+        Pixels, see :func:`nbcalib.matching.correspondences.lift_lidar_pixels`.
     entries : sequence of ManualCorrespondence, optional
         Pairs to start with (e.g. read from an earlier file).
     """
@@ -206,7 +206,7 @@ class ManualPicker:
         self.ax_camera = self.figure.add_axes((0.01, 0.12, 0.48, 0.82))
         self.ax_lidar = self.figure.add_axes((0.51, 0.12, 0.48, 0.82))
         self.ax_camera.imshow(pair.image, cmap="gray", vmin=0, vmax=255)
-        self.ax_lidar.imshow(pair.lidar_intensity, cmap="gray", vmin=0, vmax=255)
+        self.ax_lidar.imshow(pair.lidar_image.intensity, cmap="gray", vmin=0, vmax=255)
         self.ax_camera.set_title(f"camera: {self.name}.png")
         self.ax_lidar.set_title(f"LiDAR: {self.name}_lidar_intensities.png")
         for ax in (self.ax_camera, self.ax_lidar):

@@ -1,5 +1,12 @@
 """Keypoint matching between camera images and LiDAR intensity images (paper section III-D).
 
+- :func:`find_correspondences`: the matching stage, one pair's 2D-3D correspondences
+  (:mod:`~nbcalib.matching.find`), with its settings :class:`MatchConfig`
+  (:mod:`~nbcalib.matching.config`);
+- :mod:`~nbcalib.matching.multiview`: matches against camera-shaped LiDAR views at several
+  headings (or around a prior), the view with the best RANSAC support kept;
+- :mod:`~nbcalib.matching.correspondences`: keypoint matches lifted to 3-D points through an
+  index map, pooled over pairs;
 - :func:`match_images`: the public entry point; learned matchers through onnxruntime, or the
   SIFT fallback (:mod:`~nbcalib.matching.match`).
 - :func:`available_matchers`: what can run here, best first.
@@ -9,8 +16,7 @@
 - :mod:`~nbcalib.matching.onnx_export`: torch -> ONNX (``nbcalib models export``; needs torch).
 - :mod:`~nbcalib.matching.normalize`: image normalisations across the modality gap.
 - :mod:`~nbcalib.matching.views`: camera-shaped LiDAR views (the real camera's model at the
-  LiDAR's resolution, at several headings), matched by
-  :func:`nbcalib.initial_guess.match_views`.
+  LiDAR's resolution, at several headings), rendered for :func:`match_views`.
 
 Importing this package is cheap: OpenCV, onnxruntime and torch load on first use.
 
@@ -26,6 +32,18 @@ from __future__ import annotations
 import importlib
 
 _EXPORTS = {
+    "MatchConfig": "config",
+    "PairMatches": "find",
+    "find_correspondences": "find",
+    "reference_matches": "find",
+    "Correspondences": "correspondences",
+    "correspondences_from_matches": "correspondences",
+    "lift_lidar_pixels": "correspondences",
+    "lift_matches": "correspondences",
+    "pool_correspondences": "correspondences",
+    "MultiViewMatches": "multiview",
+    "ViewMatches": "multiview",
+    "match_views": "multiview",
     "match_images": "match",
     "available_matchers": "match",
     "camera_scale_for": "match",
@@ -39,13 +57,14 @@ _EXPORTS = {
     "write_matches_json": "matches",
     "draw_matches": "draw",
     "LEARNED_MATCHERS": "onnx_matcher",
+    "LEARNED_MATCHER_NAMES": "config",
     "OnnxMatcher": "onnx_matcher",
     "default_model_dir": "onnx_matcher",
     "model_dir": "onnx_matcher",
     "exported_matchers": "onnx_matcher",
-    "NORMALIZATIONS": "preprocess",
-    "normalize_image": "preprocess",
-    "fill_holes": "preprocess",
+    "NORMALIZATIONS": "normalize",
+    "normalize_image": "normalize",
+    "fill_holes": "normalize",
     "LidarView": "views",
     "heading_rotations": "views",
     "prior_rotations": "views",

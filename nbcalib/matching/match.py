@@ -18,21 +18,16 @@ import functools
 import logging
 import os
 import time
+from dataclasses import replace
 
 import numpy as np
 
+from nbcalib.matching.config import LEARNED_MATCHER_NAMES, ROTATIONS, MatchConfig
 from nbcalib.matching.matches import Matches
-from nbcalib.matching.onnx_matcher import (
-    DEFAULT_MAX_KEYPOINTS,
-    LEARNED_MATCHERS,
-    OnnxMatcher,
-    exported_matchers,
-)
+from nbcalib.matching.onnx_matcher import OnnxMatcher, exported_matchers
 from nbcalib.matching.onnx_matcher import model_dir as _model_dir
 
 __all__ = [
-    "DEFAULT_CAMERA_NORMALIZATION",
-    "DEFAULT_LIDAR_NORMALIZATION",
     "MATCHERS",
     "available_matchers",
     "camera_scale_for",
@@ -46,19 +41,7 @@ __all__ = [
 log = logging.getLogger(__name__)
 
 #: Every matcher name ``match_images`` accepts (besides ``auto``), best first.
-MATCHERS = (*LEARNED_MATCHERS, "sift")
-
-#: Normalisation of the camera image by default (docs/BENCHMARKS.md, "Matching").
-DEFAULT_CAMERA_NORMALIZATION = "gradient"
-#: Normalisation of the LiDAR image by default (docs/BENCHMARKS.md, "Matching").
-DEFAULT_LIDAR_NORMALIZATION = "gradient"
-#: Longest image side the matchers see by default, pixels (a 1920 x 960 equirectangular LiDAR
-#: image goes in at full size).
-DEFAULT_MAX_IMAGE_SIDE = 2048
-#: Hole-filling radius of the LiDAR image by default, pixels.
-DEFAULT_FILL_RADIUS = 2
-
-_ROTATIONS = (0, 90, 180, 270)
+MATCHERS = (*LEARNED_MATCHER_NAMES, "sift")
 
 
 def available_matchers(directory: str | os.PathLike | None = None) -> list[str]:
@@ -96,8 +79,8 @@ def resolve_matcher(matcher: str, directory: str | os.PathLike | None = None) ->
 
 
 def _check_rotation(degrees: int, name: str) -> int:
-    if degrees not in _ROTATIONS:
-        raise ValueError(f"{name} must be one of {_ROTATIONS} (clockwise degrees), got {degrees}")
+    if degrees not in ROTATIONS:
+        raise ValueError(f"{name} must be one of {ROTATIONS} (clockwise degrees), got {degrees}")
     return int(degrees)
 
 
@@ -213,21 +196,12 @@ def _resize(image: np.ndarray, factor: float) -> tuple[np.ndarray, np.ndarray]:
 def match_images(
     camera_image: np.ndarray,
     lidar_image: np.ndarray,
+    config: MatchConfig | None = None,
     *,
-    matcher: str = "auto",
-    match_threshold: float = 0.01,
-    rotate_camera: int = 0,
-    rotate_lidar: int = 0,
     camera_scale: float | None = None,
-    max_image_side: int | None = DEFAULT_MAX_IMAGE_SIDE,
-    camera_normalization: str = DEFAULT_CAMERA_NORMALIZATION,
-    lidar_normalization: str = DEFAULT_LIDAR_NORMALIZATION,
-    lidar_fill_radius: int = DEFAULT_FILL_RADIUS,
-    detection_threshold: float | None = None,
-    max_keypoints: int | None = DEFAULT_MAX_KEYPOINTS,
-    sift_ratio: float = 0.8,
+    lidar_fill_radius: int | None = None,
     model_dir: str | os.PathLike | None = None,
-    threads: int | None = None,
+    **overrides,
 ) -> Matches:
     """Match keypoints between a camera image and a LiDAR intensity image.
 
@@ -243,36 +217,19 @@ def match_images(
         The camera image (grey).
     lidar_image : ndarray of shape (h, w), uint8
         The LiDAR intensity image (0 = empty pixel).
-    matcher : str, optional
-        ``auto`` (the best available: :func:`available_matchers`), a learned matcher of
-        :data:`~nbcalib.matching.onnx_matcher.LEARNED_MATCHERS`, or ``sift``.
-    match_threshold : float, optional
-        Minimum match probability of a learned matcher (the reference's 0.01; the paper 0.05).
-        SIFT uses ``sift_ratio`` instead.
-    rotate_camera, rotate_lidar : int, optional
-        Clockwise rotation (0, 90, 180, 270) applied before matching, e.g. for a camera mounted
-        upside down; keypoints are returned in the unrotated images.
+    config : MatchConfig, optional
+        Matcher, thresholds, rotations, normalisations, image and keypoint limits (documented
+        there); default ``MatchConfig()``.
     camera_scale : float, optional
         Resample the camera image by this factor (:func:`camera_scale_for` computes it from the
-        two cameras; None = 1).
-    max_image_side : int or None, optional
-        Shrink both images by one common factor so that no side is longer (None: no limit).
-        The learned extractors' memory grows with the pixel count (ALIKED about 3 kB per pixel).
-    camera_normalization, lidar_normalization : str, optional
-        :data:`~nbcalib.matching.normalize.NORMALIZATIONS`.
+        two cameras); default ``config.camera_scale``, else 1.
     lidar_fill_radius : int, optional
-        Fill empty LiDAR pixels from filled ones this close (pixels; 0 = off) before
-        normalising.
-    detection_threshold : float, optional
-        Keypoint score threshold of a learned extractor (default: the model's own).
-    max_keypoints : int or None, optional
-        Keypoints per image at most (the strongest; None: all the model returns).
-    sift_ratio : float, optional
-        Lowe's ratio for the SIFT fallback.
+        Fill empty LiDAR pixels from filled ones this close before normalising (pixels, 0 =
+        off); default ``config.fill_radius``.
     model_dir : str or os.PathLike, optional
         Where the exported models are (default: ``$NBCALIB_MODEL_DIR`` or the user cache).
-    threads : int, optional
-        onnxruntime intra-op threads (default: the number of cores).
+    **overrides
+        Attributes of :class:`MatchConfig` to change for this call (``matcher="sift"``, ...).
 
     Returns
     -------
@@ -286,18 +243,23 @@ def match_images(
         A learned matcher was asked for by name but has not been exported (the message names
         the command that exports it).
     """
+    cfg = replace(config or MatchConfig(), **overrides)
+    if camera_scale is None:
+        camera_scale = cfg.camera_scale
+    if lidar_fill_radius is None:
+        lidar_fill_radius = cfg.fill_radius
+    match_threshold, max_image_side = cfg.match_threshold, cfg.max_image_side
+    rotate_camera, rotate_lidar = cfg.rotate_camera, cfg.rotate_lidar
+    camera_normalization, lidar_normalization = cfg.camera_normalization, cfg.lidar_normalization
+    max_keypoints = cfg.max_keypoints
     from nbcalib.matching.normalize import fill_holes, normalize_image
 
     camera_image = _check_grey(camera_image, "camera_image")
     lidar_image = _check_grey(lidar_image, "lidar_image")
-    rotate_camera = _check_rotation(rotate_camera, "rotate_camera")
-    rotate_lidar = _check_rotation(rotate_lidar, "rotate_lidar")
-    if not np.isfinite(match_threshold):
-        raise ValueError(f"match_threshold must be finite, got {match_threshold}")
     scale = 1.0 if camera_scale is None else float(camera_scale)
     if not (np.isfinite(scale) and 0.05 <= scale <= 20.0):
         raise ValueError(f"camera_scale must be in [0.05, 20], got {camera_scale}")
-    name = resolve_matcher(matcher, model_dir)
+    name = resolve_matcher(cfg.matcher, model_dir)
     t0 = time.perf_counter()
     lidar = fill_holes(lidar_image, radius=lidar_fill_radius) if lidar_fill_radius else lidar_image
     cam = rotate_image(camera_image, rotate_camera)
@@ -313,11 +275,11 @@ def match_images(
 
         kpts0, desc0 = sift_features(cam, max_keypoints=max_keypoints or 0)
         kpts1, desc1 = sift_features(lid, max_keypoints=max_keypoints or 0)
-        matches0, confidence = sift_match(desc0, desc1, ratio=sift_ratio)
+        matches0, confidence = sift_match(desc0, desc1, ratio=cfg.sift_ratio)
     else:
-        session = _session(name, str(_model_dir(model_dir)), threads)
+        session = _session(name, str(_model_dir(model_dir)), cfg.threads)
         options = dict(
-            detection_threshold=detection_threshold, max_keypoints=max_keypoints, resize=None
+            detection_threshold=cfg.detection_threshold, max_keypoints=max_keypoints, resize=None
         )
         f0 = session.extract(cam, **options)
         f1 = session.extract(lid, **options)

@@ -22,10 +22,9 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["NORMALIZATIONS", "fill_holes", "normalize_image"]
+from nbcalib.matching.config import NORMALIZATIONS
 
-#: Normalisations :func:`normalize_image` knows.
-NORMALIZATIONS = ("none", "equalize", "clahe", "invert", "gradient")
+__all__ = ["NORMALIZATIONS", "fill_holes", "normalize_image"]
 
 
 def _check(image) -> np.ndarray:

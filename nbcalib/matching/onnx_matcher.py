@@ -29,6 +29,7 @@ from pathlib import Path
 import numpy as np
 
 from nbcalib.errors import InputError
+from nbcalib.matching.config import MatchConfig
 
 __all__ = [
     "DEFAULT_MAX_KEYPOINTS",
@@ -50,7 +51,7 @@ MODEL_DIR_ENV = "NBCALIB_MODEL_DIR"
 MANIFEST = "model.json"
 
 #: Keypoints per image used by default at run time (the matcher's cost grows with its square).
-DEFAULT_MAX_KEYPOINTS = 2048
+DEFAULT_MAX_KEYPOINTS = MatchConfig().max_keypoints
 
 #: Manifest format version; bump when the graphs' inputs or outputs change.
 FORMAT_VERSION = 2

@@ -60,7 +60,7 @@ class LidarView:
     index : ndarray of shape (h, w), int32
         Cloud row per pixel of the z-buffer (and splat), -1 where empty; holes filled in
         ``intensity`` are empty here, so that a keypoint lifts to the *nearest* point within the
-        search radius (:func:`~nbcalib.initial_guess.correspondences.lift_lidar_pixels`), not
+        search radius (:func:`~nbcalib.matching.correspondences.lift_lidar_pixels`), not
         to the one the fill happened to copy.
     scale : float
         Real camera pixels to view pixels (``camera_scale`` of :func:`match_images`).
@@ -247,7 +247,7 @@ def render_view(
     up to ``min(max_splat, splat_pixels_at_1m / d)`` pixels away, nearer points win), then hole
     filling of the intensities within ``fill_radius`` pixels (through a filled copy of the
     index map). The returned ``index`` is not filled: lift keypoints with a search radius of at
-    least ``fill_radius`` (:func:`~nbcalib.initial_guess.multiview.match_views` does).
+    least ``fill_radius`` (:func:`~nbcalib.matching.multiview.match_views` does).
 
     Parameters
     ----------

@@ -1,6 +1,8 @@
 """Settings of fine registration, importable without numba or SciPy.
 
-Command-line parsers take their defaults from :class:`RefineConfig`; keeping it apart from
+:class:`RefineConfig` is the ``refine`` section of the pipeline's config
+(:class:`nbcalib.config.CalibrationConfig`), and command-line parsers take their defaults from
+it; keeping it apart from
 :mod:`nbcalib.registration.refine` (which loads the numba kernels) keeps every ``nbcalib``
 command quick to start. :mod:`~nbcalib.registration.refine` re-exports it.
 """
@@ -72,6 +74,8 @@ class RefineConfig:
         class, noisy normals) stay on the plain NID this way.
     parallel : bool
         Multithreaded NID kernels (same values; slower in CPU time on a loaded machine).
+    max_pairs : int or None
+        Register only the first ``max_pairs`` pairs of a job (None: all).
     """
 
     optimizer: str = "hybrid"
@@ -94,6 +98,7 @@ class RefineConfig:
     orientation_classes: bool = True
     min_class_points: int = 5000
     parallel: bool = True
+    max_pairs: int | None = None
 
     def __post_init__(self):
         if self.optimizer not in OPTIMIZERS:
@@ -117,5 +122,9 @@ class RefineConfig:
             raise ValueError(f"pyramid_levels must be in [0, 5], got {self.pyramid_levels}")
         if self.min_class_points < 1:
             raise ValueError(f"min_class_points must be >= 1, got {self.min_class_points}")
+        if self.max_pairs is not None and self.max_pairs < 1:
+            raise ValueError(f"max_pairs must be >= 1, got {self.max_pairs}")
+        if self.bins < 2:
+            raise ValueError(f"bins must be >= 2, got {self.bins}")
         if self.min_pyramid_size < 16:
             raise ValueError(f"min_pyramid_size must be >= 16, got {self.min_pyramid_size}")

@@ -30,10 +30,11 @@ import numpy as np
 
 from nbcalib.errors import InputError, MissingExtraError, require
 from nbcalib.io._files import write_bytes_atomic, write_text_atomic
-from nbcalib.io.calib_json import FINAL_STAGE, INITIAL_STAGES, CalibFile
-from nbcalib.report.quality import AXIS_NAMES, AssessConfig, Quality, assess
+from nbcalib.io.calib_json import FINAL_STAGE
+from nbcalib.report.config import AssessConfig
+from nbcalib.report.quality import AXIS_NAMES, Quality
 
-__all__ = ["REPORT_DIR", "Report", "make_report"]
+__all__ = ["REPORT_DIR", "Report", "make_report", "write_report"]
 
 #: Folder of the report inside the work directory.
 REPORT_DIR = "report"
@@ -76,21 +77,17 @@ class Report:
         return _summary_html(self.quality) + images
 
 
-def make_report(
-    workdir: str | os.PathLike,
-    *,
-    progress: Callable[[int, int, str], None] | None = None,
-    assess_config: AssessConfig | None = None,
-) -> Report:
-    """Judge the calibration of a work directory and write its HTML report.
+def make_report(workdir: str | os.PathLike, *, assess_config: AssessConfig | None = None) -> Report:
+    """Judge the calibration of a work directory and write its HTML report (``nbcalib report``).
+
+    The assessment stage of :class:`nbcalib.pipeline.Calibrator`, with the settings the work
+    directory recorded (``assess_config`` replaces their ``assess`` section).
 
     Parameters
     ----------
     workdir : str or PathLike
         A work directory with ``calib.json`` holding ``results.T_lidar_camera`` (written by
         ``nbcalib calibrate``).
-    progress : callable, optional
-        Called as ``progress(done, total, what)`` after each step.
     assess_config : AssessConfig, optional
         Scale and verdict limits of :func:`~nbcalib.report.quality.assess`.
 
@@ -104,55 +101,65 @@ def make_report(
         No work directory, no ``calib.json``, no calibration result, or a missing or corrupt
         pair file; the message names the file and the command to run first.
     """
-    from nbcalib.registration.refine import RegistrationPair
+    from dataclasses import replace
+
+    from nbcalib.config import config_from_record
+    from nbcalib.pipeline import Calibrator
     from nbcalib.workdir import WorkDir
 
     work = WorkDir(workdir)
-    if not work.path.is_dir():
-        raise InputError("work directory not found", work.path)
-    if not work.calib_path.is_file():
+    if work.path.is_dir() and not work.calib_path.is_file():
         raise InputError("no calib.json here: run nbcalib preprocess first", work.path)
-    calib = work.read_calib()
-    if not calib.has_result(FINAL_STAGE):
-        raise InputError(
-            "no calibration result (results.T_lidar_camera): run nbcalib calibrate first",
-            work.calib_path,
-        )
-    T = calib.get_T_camera_lidar(FINAL_STAGE)
-    info = calib.nbcalib.get("calibration")
-    info = info if isinstance(info, dict) else {}
-    T_init, init_stage = _initial_guess(calib, info)
-    refine_config = _refine_config(info)
-    names = info.get("pairs") if isinstance(info.get("pairs"), list) else None
-    names = [n for n in names if isinstance(n, str)] if names else work.names()
-    if not names:
-        raise InputError("no LiDAR-camera pair in the work directory", work.path)
-    converged = info.get("converged") if isinstance(info.get("converged"), bool) else None
+    config = config_from_record(work.require_preprocessed().nbcalib.get("config"))
+    if assess_config is not None:
+        config = replace(config, assess=assess_config)
+    calibrator = Calibrator(config, workdir=work)
+    calibrator.run(only="report")
+    return calibrator.report
 
-    total = len(names) + 3
-    step = _Progress(progress, total)
-    camera = calib.camera_model()
-    loaded, pairs = [], []
-    for name in names:
-        p = work.load_pair(name)
-        loaded.append(p)
-        pairs.append(RegistrationPair(camera, p.image, p.points_lidar, p.intensities, name))
-        step(f"loaded {name}")
-    quality = assess(
-        pairs,
-        T,
-        T_init=T_init,
-        config=refine_config,
-        converged=converged,
-        assess_config=assess_config,
-    )
-    step("assessed")
 
+def write_report(
+    work,
+    quality: Quality,
+    loaded,
+    pairs,
+    T_camera_lidar,
+    T_init,
+    refine_config,
+    init_stage: str | None,
+    *,
+    progress: Callable[[str], None] | None = None,
+) -> Report:
+    """Write ``report/index.html`` with its figures, and the figures into ``calib.json``.
+
+    Parameters
+    ----------
+    work : WorkDir
+        The work directory.
+    quality : Quality
+        :func:`~nbcalib.report.quality.assess`'s result for ``T_camera_lidar``.
+    loaded : sequence of PairData
+        The pairs' products (camera image, LiDAR image and index map).
+    pairs : sequence of RegistrationPair
+        The same pairs as registration saw them.
+    T_camera_lidar : ndarray of shape (4, 4)
+        The result judged.
+    T_init : ndarray of shape (4, 4) or None
+        Where fine registration started.
+    refine_config : RefineConfig
+        Its settings (hidden-point removal for the overlays).
+    init_stage : str or None
+        Name of the start (``init_T_lidar_camera_auto``, ``--init``...), shown on the page.
+    progress : callable, optional
+        Called with a short text after each step.
+    """
+    step = progress or (lambda what: None)
     try:
         require("matplotlib", "viz")
         have_mpl = True
     except MissingExtraError:
         have_mpl = False
+    T = np.asarray(T_camera_lidar, dtype=np.float64)
     final = work.path / REPORT_DIR
     tmp = work.path / f".{REPORT_DIR}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp"
     tmp.mkdir()
@@ -186,45 +193,6 @@ def make_report(
         quality=quality,
         figures=[final / f.name for f in figures],
     )
-
-
-class _Progress:
-    def __init__(self, callback, total: int):
-        self.callback, self.total, self.done = callback, total, 0
-
-    def __call__(self, what: str) -> None:
-        self.done += 1
-        if self.callback is not None:
-            self.callback(self.done, self.total, what)
-
-
-def _initial_guess(calib: CalibFile, info: dict) -> tuple[np.ndarray | None, str | None]:
-    """The initial guess ``calibrate`` started from, if calib.json still knows it."""
-    start = info.get("start")
-    stored = info.get("start_T_lidar_camera")
-    if stored is not None and len(stored) == 7:  # what calibrate actually started from
-        from nbcalib.transforms import invert_T, pose_from_xyz_quat
-
-        return invert_T(pose_from_xyz_quat(stored)), str(start)
-    if start == "--init":
-        return None, None  # given on the command line by an older nbcalib, not stored
-    stage = start if start in INITIAL_STAGES else calib.latest_initial_stage()
-    if stage is None or not calib.has_result(stage):
-        return None, None
-    return calib.get_T_camera_lidar(stage), stage
-
-
-def _refine_config(info: dict):
-    from nbcalib.registration.config import OPTIMIZERS
-    from nbcalib.registration.refine import RefineConfig
-
-    kwargs = {}
-    if info.get("optimizer") in OPTIMIZERS:
-        kwargs["optimizer"] = info["optimizer"]
-    bins = info.get("bins")
-    if isinstance(bins, int) and not isinstance(bins, bool) and 2 <= bins <= 256:
-        kwargs["bins"] = bins
-    return RefineConfig(**kwargs)
 
 
 def _swap_in(tmp: Path, final: Path) -> None:
@@ -264,7 +232,7 @@ def _write_figures(folder: Path, quality, loaded, pairs, config, T, T_init) -> l
             fg.overlays(pair.camera, work_pair.image, pair.points_lidar, pair.intensities, poses),
         )
         edges = fg.lidar_edge_points(
-            work_pair.lidar_intensity, work_pair.lidar_index, pair.points_lidar
+            work_pair.lidar_image.intensity, work_pair.lidar_index, pair.points_lidar
         )
         save(
             f"edges_{stem}.png",

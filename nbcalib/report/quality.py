@@ -52,6 +52,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from nbcalib.registration.refine import RefineConfig, RegistrationPair, build_cost, visible_subset
+from nbcalib.report.config import AssessConfig
 from nbcalib.transforms import invert_T, pose_error, se3_exp, validate_T
 
 __all__ = ["AXIS_NAMES", "AssessConfig", "Quality", "assess", "interval_quantiles", "rejudge"]
@@ -62,91 +63,6 @@ AXIS_NAMES = ("tx", "ty", "tz", "rx", "ry", "rz")
 #: Seed of the Monte-Carlo quantiles of the total translation/rotation error (deterministic).
 _QUANTILE_SEED = 20261123
 _QUANTILE_SAMPLES = 20000
-
-
-@dataclass(frozen=True)
-class AssessConfig:
-    """Settings of :func:`assess`; lengths in metres, angles in degrees.
-
-    Attributes
-    ----------
-    confidence : float
-        Confidence of the stated intervals (0.95).
-    scale : float
-        Variance scale of the curvature model (module docstring); tuned on synthetic pairs by
-        benchmarks/bench_report_coverage.py.
-    curve_samples : int
-        Samples per NID curve (odd, so that the result itself is one).
-    curve_translation, curve_rotation_deg : float
-        Half-range of the translation and rotation curves.
-    hessian_translation, hessian_rotation_deg : float
-        Central-difference steps of the Hessian.
-    max_curvature_scale : int
-        An eigen-direction of a pair's Hessian without positive curvature is measured again by
-        second differences of the NID along it at 1, 2, 4, ... up to this many Hessian steps
-        (0: never; module docstring).
-    min_visible_points : int
-        Fewer visible points over all pairs is "too few points in view".
-    max_translation_uncertainty, max_rotation_uncertainty_deg : float
-        A stated total uncertainty (at ``confidence``) above these is "flat cost".
-    min_curve_rise : float
-        A curve whose ends rise less than this above the result (NID units, per pair) is flat.
-    max_minimum_offset_translation, max_minimum_offset_rotation_deg : float
-        A curve's lowest sample farther than this from the result, and lower than it by more
-        than ``min_curve_rise / 4``, means the result is not at a minimum.
-    max_init_translation, max_init_rotation_deg : float
-        Result and initial guess farther apart than this are "far apart".
-    max_nid : float
-        A mean per-pair NID above this means image and LiDAR share almost no information.
-    pair_disagreement_quantile : float
-        Pairs disagree when a pair's own optimum lies outside this quantile of its own
-        uncertainty (chi-square with 6 degrees of freedom).
-    """
-
-    confidence: float = 0.95
-    # tuned by benchmarks/bench_report_coverage.py on demo-sized pairs (640 x 480, 0.02 m voxel,
-    # 1 and 3 pairs), tuning half: 8.15 with the hybrid optimiser (RefineConfig default since
-    # 2026-12-01 ~21:00 UTC), 6.78 with L-BFGS alone before; the first tuning (2026-11-23,
-    # 400 x 300 pairs with <= 20 000 points) gave 2.06, with which good three-pair results
-    # were called "pairs disagree"
-    scale: float = 8.15
-    curve_samples: int = 21
-    curve_translation: float = 0.10
-    curve_rotation_deg: float = 2.0
-    hessian_translation: float = 0.005
-    hessian_rotation_deg: float = 0.1
-    max_curvature_scale: int = 16
-    min_visible_points: int = 2000
-    max_translation_uncertainty: float = 0.05
-    max_rotation_uncertainty_deg: float = 1.0
-    min_curve_rise: float = 0.002
-    max_minimum_offset_translation: float = 0.02
-    max_minimum_offset_rotation_deg: float = 0.4
-    max_init_translation: float = 0.20
-    max_init_rotation_deg: float = 4.0
-    max_nid: float = 0.97
-    pair_disagreement_quantile: float = 0.999
-
-    def __post_init__(self):
-        if not 0.0 < self.confidence < 1.0:
-            raise ValueError(f"confidence must be in (0, 1), got {self.confidence}")
-        if not 0.0 < self.pair_disagreement_quantile < 1.0:
-            raise ValueError("pair_disagreement_quantile must be in (0, 1)")
-        if not self.scale > 0.0:
-            raise ValueError(f"scale must be > 0, got {self.scale}")
-        if self.max_curvature_scale < 0:
-            raise ValueError(f"max_curvature_scale must be >= 0, got {self.max_curvature_scale}")
-        if self.curve_samples < 3 or self.curve_samples % 2 == 0:
-            raise ValueError(f"curve_samples must be odd and >= 3, got {self.curve_samples}")
-        positive = (
-            "curve_translation",
-            "curve_rotation_deg",
-            "hessian_translation",
-            "hessian_rotation_deg",
-        )
-        for name in positive:
-            if not getattr(self, name) > 0.0:
-                raise ValueError(f"{name} must be > 0")
 
 
 @dataclass

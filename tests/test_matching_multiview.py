@@ -9,13 +9,8 @@ import pytest
 from tolerances import TOL
 
 from nbcalib.camera import create_camera, example_camera
-from nbcalib.initial_guess import (
-    Correspondences,
-    correspondences_from_matches,
-    estimate_initial_guess,
-    match_views,
-)
-from nbcalib.matching.matches import Matches
+from nbcalib.initial_guess import estimate_initial_guess
+from nbcalib.matching import Correspondences, correspondences_from_matches, match_views
 from nbcalib.matching.views import (
     _fill_index,
     heading_rotations,
@@ -173,12 +168,12 @@ def test_match_views_finds_the_heading_and_the_pose_with_sift(rng, yaw_deg):
         points,
         intensities,
         matcher="sift",
-        n_headings=8,
+        views=8,
         camera_normalization="none",
         lidar_normalization="none",
         name="p",
     )
-    # 8 headings, then one view from the pose they give (refine=True)
+    # 8 headings, then one view from the pose they give (refine_view=True)
     assert len(mv.views) == 9 and 0 <= mv.best < 8 and mv.pooled[-1] == 8
     best = mv.views[mv.best].view.heading_deg
     assert abs((best - yaw_deg + 180.0) % 360.0 - 180.0) <= 22.5 + 1e-9
@@ -204,7 +199,7 @@ def test_match_views_with_a_prior_renders_only_around_it(rng):
         matcher="sift",
         T_camera_lidar_prior=truth,
         prior_yaw_offsets_deg=(0.0, 20.0),
-        refine=False,
+        refine_view=False,
         camera_normalization="none",
         lidar_normalization="none",
     )
@@ -212,8 +207,11 @@ def test_match_views_with_a_prior_renders_only_around_it(rng):
     assert mv.views[0].ransac_inliers > mv.views[1].ransac_inliers
 
 
-def test_to_matches_round_trips_through_the_stored_lidar_image(rng):
-    from nbcalib.preprocess.lidar_image import make_virtual_camera
+def test_reference_matches_put_lidar_keypoints_where_the_index_map_shows_the_point(rng):
+    """matches.json for the reference toolbox: it truncates kpts1 to a pixel and reads the index
+    map there, so each LiDAR keypoint must be the (integer) pixel that shows its point."""
+    from nbcalib.matching.find import reference_matches
+    from nbcalib.preprocess.lidar_image import make_virtual_camera, render_lidar_image
 
     camera, image, points, intensities, _ = _self_consistent_pair(rng, 20.0)
     mv = match_views(
@@ -222,30 +220,24 @@ def test_to_matches_round_trips_through_the_stored_lidar_image(rng):
         points,
         intensities,
         matcher="sift",
-        n_headings=6,
-        refine=False,
+        views=6,
+        refine_view=False,
         camera_normalization="none",
         lidar_normalization="none",
     )
     vcam, T_vcam_lidar = make_virtual_camera(math.pi)
-    m = mv.to_matches(vcam, T_vcam_lidar)
-    assert m.num_matches == len(mv.correspondences) and m.info["mode"] == "views"
-    # the LiDAR keypoints are the points' pixels in the equirectangular LiDAR image
-    uv, _ = vcam.project(transform_points(T_vcam_lidar, mv.correspondences.points_lidar))
-    np.testing.assert_allclose(m.kpts_lidar, uv, **TOL["transform"])
-    # and initial-guess takes the recorded cloud rows, not a lift through another index map
-    blank = np.full((vcam.height, vcam.width), -1, dtype=np.int32)
-    corr = correspondences_from_matches(m, blank, points, name="x")
-    np.testing.assert_array_equal(corr.points_lidar, mv.correspondences.points_lidar)
-    np.testing.assert_array_equal(corr.uv_camera, mv.correspondences.uv_camera)
-
-
-def test_recorded_rows_must_fit_the_cloud():
-    m = Matches(
-        np.zeros((2, 2)), np.zeros((2, 2)), [0, 1], [1.0, 1.0], info={"kpts1_point_index": [0, 9]}
-    )
-    with pytest.raises(ValueError, match="kpts1_point_index"):
-        correspondences_from_matches(m, np.zeros((4, 4), np.int32), np.zeros((5, 3)))
+    index = render_lidar_image(vcam, T_vcam_lidar, points, intensities).index
+    corr = mv.correspondences
+    m = reference_matches(corr, index, matcher="sift")
+    shown = np.isin(corr.point_index, index[index >= 0])
+    assert 0 < m.num_matches == int(np.count_nonzero(shown)) <= len(corr)
+    u, v = m.kpts_lidar.astype(np.int64).T
+    np.testing.assert_array_equal(m.kpts_lidar, np.column_stack([u, v]))  # whole pixels
+    np.testing.assert_array_equal(index[v, u], corr.point_index[shown])
+    np.testing.assert_array_equal(m.kpts_camera, corr.uv_camera[shown])
+    # lifting the file's keypoints (no search radius) finds exactly those points again
+    lifted = correspondences_from_matches(m, index, points, search_radius=0.0)
+    np.testing.assert_array_equal(lifted.point_index, corr.point_index[shown])
 
 
 def test_match_views_checks_its_inputs(rng):
@@ -267,7 +259,9 @@ def test_find_matches_views_then_initial_guess_on_a_work_directory(tmp_path, mon
     from nbcalib.cli import main
     from nbcalib.io.calib_json import AUTO_STAGE
     from nbcalib.matching.matches import read_matches_json
-    from nbcalib.preprocess.lidar_image import make_virtual_camera, render_lidar_image
+    from nbcalib.preprocess.lidar_image import make_virtual_camera
+    from nbcalib.preprocess.prepare import render_pairs
+    from nbcalib.products import PairData, VirtualCamera
     from nbcalib.workdir import WorkDir, make_calib, set_virtual_camera
 
     rng = np.random.default_rng(3)
@@ -276,17 +270,14 @@ def test_find_matches_views_then_initial_guess_on_a_work_directory(tmp_path, mon
     points = points.astype(np.float32).astype(np.float64)
     intensities = intensities.astype(np.float32).astype(np.float64)
     vcam, T_vcam_lidar = make_virtual_camera(math.pi, equirectangular_size=(720, 360))
+    virtual, (pair,) = render_pairs(
+        [PairData("000000", image, points, intensities)], VirtualCamera(vcam, T_vcam_lidar)
+    )
     wd = WorkDir(tmp_path / "work")
     wd.prepare()
-    wd.write_pair(
-        "000000",
-        image=image,
-        points_lidar=points,
-        intensities=intensities,
-        lidar_image=render_lidar_image(vcam, T_vcam_lidar, points, intensities),
-    )
+    wd.write_pair(pair)
     calib = make_calib(camera, ["000000"])
-    set_virtual_camera(calib, vcam, T_vcam_lidar)
+    set_virtual_camera(calib, virtual)
     wd.write_calib(calib)
     monkeypatch.setenv("NBCALIB_MODEL_DIR", str(tmp_path / "no-models"))
     args = ["--camera-normalization", "none", "--lidar-normalization", "none"]
@@ -295,7 +286,8 @@ def test_find_matches_views_then_initial_guess_on_a_work_directory(tmp_path, mon
     )
     m = read_matches_json(wd.matches_path("000000"))
     assert m.info["mode"] == "views" and len(m.info["views"]) == 7  # 6 headings + refined
-    assert len(m.info["kpts1_point_index"]) == len(m.kpts_lidar) >= 20
+    corr = wd.read_correspondences(wd.load_pair("000000"), search_radius=0.0)
+    assert len(corr) >= 20 and m.num_matches <= len(corr)
     assert (wd.path / "000000_matches.png").is_file()
     assert main(["-q", "initial-guess", str(wd.path)]) == 0
     e = pose_errors(wd.read_calib().get_T_camera_lidar(AUTO_STAGE), truth)

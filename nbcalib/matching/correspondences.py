@@ -226,33 +226,9 @@ def correspondences_from_matches(
     """Lift a :class:`nbcalib.matching.matches.Matches` (a ``<name>_matches.json``).
 
     The match confidences are kept (:attr:`Correspondences.confidence`). See
-    :func:`lift_matches` for the parameters. Matches made against camera-shaped LiDAR views
-    (:func:`nbcalib.initial_guess.multiview.match_views`, ``nbcalib find-matches --views``)
-    carry the cloud row of each LiDAR keypoint (``info["kpts1_point_index"]``, lifted through
-    the view's own index map); those rows are used instead of lifting through ``index_map``.
+    :func:`lift_matches` for the parameters.
     """
     uv_camera, uv_lidar, confidence = matches.matched()
-    rows = matches.info.get("kpts1_point_index") if isinstance(matches.info, dict) else None
-    if rows is not None:
-        points = np.asarray(points_lidar, dtype=np.float64)
-        rows = np.asarray(rows, dtype=np.int64).reshape(-1)
-        if rows.shape != (len(matches.kpts_lidar),) or np.any(rows >= len(points)):
-            raise ValueError(
-                f"kpts1_point_index needs one cloud row (< {len(points)}) per LiDAR keypoint "
-                f"({len(matches.kpts_lidar)}), got {rows.shape}"
-            )
-        point_rows = rows[matches.matches[matches.matches >= 0]]
-        found = point_rows >= 0
-        return Correspondences(
-            uv_camera=uv_camera[found],
-            points_lidar=points[point_rows[found]],
-            uv_lidar=uv_lidar[found],
-            point_index=point_rows[found],
-            pair=np.zeros(int(np.count_nonzero(found)), dtype=np.int64),
-            names=(name,),
-            n_matches=len(uv_camera),
-            confidence=confidence[found],
-        )
     return lift_matches(
         uv_camera,
         uv_lidar,

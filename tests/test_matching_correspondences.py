@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from nbcalib.initial_guess.correspondences import (
+from nbcalib.matching.correspondences import (
     Correspondences,
     correspondences_from_matches,
     lift_lidar_pixels,

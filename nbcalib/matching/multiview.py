@@ -2,7 +2,7 @@
 
 The matchers need the LiDAR image in the camera's geometry and scale (:mod:`nbcalib.matching.
 views`). Without a prior the camera may look anywhere around a spinning LiDAR, so the dense
-cloud is rendered through the (scaled) real camera at ``n_headings`` level headings, evenly
+cloud is rendered through the (scaled) real camera at ``views`` level headings, evenly
 spaced about LiDAR z (12 views 30 degrees apart overlap for any camera wider than 30 degrees);
 with a prior ``T_camera_lidar`` a few views around its orientation replace them. Views that
 show almost nothing (a Livox's back side) are skipped.
@@ -27,12 +27,14 @@ from __future__ import annotations
 
 import os
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from nbcalib.camera import CameraModel
-from nbcalib.initial_guess.correspondences import (
+from nbcalib.initial_guess.config import InitialGuessConfig
+from nbcalib.matching.config import MatchConfig
+from nbcalib.matching.correspondences import (
     Correspondences,
     lift_matches,
     pool_correspondences,
@@ -91,56 +93,6 @@ class MultiViewMatches:
     correspondences: Correspondences
     seconds: float
 
-    def to_matches(self, lidar_camera: CameraModel, T_vcam_lidar, *, matcher: str = "") -> object:
-        """The kept correspondences as matches against the stored LiDAR image.
-
-        The camera keypoints stay; each LiDAR keypoint is its 3-D point projected into the
-        LiDAR image of preprocessing (``lidar_camera``, ``T_vcam_lidar`` from ``calib.json``),
-        so that the reference toolbox can read the file and the picture shows where the points
-        are. The cloud row of every LiDAR keypoint goes to ``info["kpts1_point_index"]``
-        (:func:`~nbcalib.initial_guess.correspondences.correspondences_from_matches` uses it
-        instead of lifting). Points that the LiDAR image does not show are left out.
-
-        Returns
-        -------
-        Matches
-        """
-        from nbcalib.matching.matches import Matches
-        from nbcalib.transforms import transform_points
-
-        corr = self.correspondences
-        uv, ok = lidar_camera.project(transform_points(T_vcam_lidar, corr.points_lidar))
-        ok &= np.all(np.isfinite(uv), axis=1)
-        n = int(np.count_nonzero(ok))
-        info = {
-            "mode": "views",
-            "views": [
-                {
-                    "heading_deg": round(v.view.heading_deg, 2),
-                    "matches": v.matches.num_matches,
-                    "lifted": len(v.correspondences),
-                    "ransac_inliers": v.ransac_inliers,
-                }
-                for v in self.views
-            ],
-            "best_view": self.best,
-            "pooled_views": list(self.pooled),
-            "kpts1_point_index": [int(i) for i in corr.point_index[ok]],
-            "seconds": round(self.seconds, 3),
-        }
-        if self.views:
-            info.update(
-                {k: v for k, v in self.views[0].matches.info.items() if k not in ("seconds",)}
-            )
-        return Matches(
-            corr.uv_camera[ok],
-            uv[ok],
-            np.arange(n),
-            corr.weights[ok] if corr.confidence is not None else np.ones(n),
-            matcher=matcher or (self.views[0].matches.matcher if self.views else ""),
-            info=info,
-        )
-
     def summary(self) -> str:
         """One line per view: heading, fill, matches, lifted, RANSAC inliers; the winner marked."""
         lines = []
@@ -155,18 +107,7 @@ class MultiViewMatches:
 
 
 def _view_matches(
-    camera,
-    image,
-    view,
-    points,
-    matcher,
-    model_dir,
-    search_radius,
-    name,
-    ransac_iterations,
-    ransac_threshold,
-    seed,
-    match_options,
+    camera, image, view, points, config, model_dir, search_radius, name, ransac_threshold, seed
 ) -> ViewMatches:
     """Match one view, lift its keypoints, count its rotation-only RANSAC support."""
     from nbcalib.errors import InputError
@@ -176,11 +117,10 @@ def _view_matches(
     m = match_images(
         image,
         view.intensity,
-        matcher=matcher,
+        config,
         camera_scale=view.scale,
         lidar_fill_radius=0,  # the view is filled already, with its index map
         model_dir=model_dir,
-        **match_options,
     )
     uv_c, uv_v, conf = m.matched()
     corr = lift_matches(
@@ -193,7 +133,7 @@ def _view_matches(
                 camera,
                 corr.uv_camera,
                 corr.points_lidar,
-                iterations=ransac_iterations,
+                iterations=config.view_ransac_iterations,
                 threshold=ransac_threshold,
                 seed=seed,
             )
@@ -203,7 +143,7 @@ def _view_matches(
     return ViewMatches(view, m, corr, R_best, support)
 
 
-def _refined_view(camera, corr, ransac_threshold, seed, render, match) -> ViewMatches | None:
+def _refined_view(camera, corr, guess_config, seed, render, match) -> ViewMatches | None:
     """One more view rendered from the pose the kept correspondences give (None if none).
 
     ``render(R_vcam_lidar, t_vcam_lidar)`` and ``match(view)`` are :func:`match_views`'s own
@@ -214,12 +154,7 @@ def _refined_view(camera, corr, ransac_threshold, seed, render, match) -> ViewMa
 
     try:
         guess = estimate_initial_guess(
-            camera,
-            corr.uv_camera,
-            corr.points_lidar,
-            weights=corr.weights,
-            ransac_threshold=ransac_threshold,
-            seed=seed,
+            camera, corr.uv_camera, corr.points_lidar, guess_config, weights=corr.weights, seed=seed
         )
     except InputError:
         return None
@@ -234,27 +169,14 @@ def match_views(
     camera_image: np.ndarray,
     points_lidar,
     intensities,
+    config: MatchConfig | None = None,
     *,
-    matcher: str = "auto",
-    n_headings: int = 12,
+    guess_config: InitialGuessConfig | None = None,
     T_camera_lidar_prior=None,
-    prior_yaw_offsets_deg=(-20.0, 0.0, 20.0),
-    pixels_per_degree: float | None = None,
-    min_fill: float = 0.05,
-    fill_radius: int = 2,
-    splat_pixels_at_1m: float = 0.0,
-    median: int = 0,
-    search_radius: float = 2.0,
-    ransac_iterations: int = 2048,
-    ransac_threshold: float = 5.0,
-    pool: bool = True,
-    pool_angle_deg: float = 2.0,
-    min_pool_support: int = 6,
-    refine: bool = True,
     seed: int = 0,
     name: str = "",
     model_dir: str | os.PathLike | None = None,
-    **match_options,
+    **overrides,
 ) -> MultiViewMatches:
     """Match the camera image with camera-shaped LiDAR views (module docstring).
 
@@ -268,51 +190,25 @@ def match_views(
         Dense cloud, LiDAR frame, metres.
     intensities : array_like of shape (N,)
         Equalised intensities in [0, 1].
-    matcher : str, optional
-        As :func:`nbcalib.matching.match_images` (``auto``: the best exported, else ``sift``).
-    n_headings : int, optional
-        Level views around LiDAR z without a prior.
+    config : MatchConfig, optional
+        The matcher and its settings, and those of the views (``views`` headings,
+        ``prior_yaw_offsets_deg``, ``pixels_per_degree``, ``min_fill``, ``fill_radius``,
+        ``splat_pixels_at_1m``, ``median``, ``search_radius``, ``view_ransac_iterations``,
+        ``pool``, ``pool_angle_deg``, ``min_pool_support``, ``refine_view``: documented there).
+    guess_config : InitialGuessConfig, optional
+        The initial guess's settings: its ``ransac_threshold`` scores the views, and the pose
+        of the refined view (``config.refine_view``) is estimated with them.
     T_camera_lidar_prior : array_like of shape (4, 4), optional
         A rough extrinsic: views at its orientation turned by ``prior_yaw_offsets_deg`` instead
         of the heading sweep.
-    prior_yaw_offsets_deg : sequence of float, optional
-        Yaw offsets of the views around the prior, degrees.
-    pixels_per_degree : float, optional
-        Angular resolution of the views (default
-        :data:`~nbcalib.matching.views.DEFAULT_PIXELS_PER_DEGREE`; never above the camera's).
-    min_fill : float, optional
-        Views with a smaller fraction of filled pixels are not matched.
-    fill_radius : int, optional
-        Hole filling of the views, pixels.
-    splat_pixels_at_1m : float, optional
-        Range-dependent splat of the views (0: off; see
-        :func:`~nbcalib.matching.views.render_view`).
-    median : int, optional
-        Median filter of the view intensities (:func:`~nbcalib.matching.views.render_view`).
-    search_radius : float, optional
-        Lifting radius, pixels (:func:`~nbcalib.initial_guess.correspondences.lift_lidar_pixels`).
-    ransac_iterations, ransac_threshold : optional
-        Rotation-only RANSAC per view (hypotheses; pixels).
-    pool : bool, optional
-        Add the correspondences of views whose RANSAC rotation agrees with the best view's.
-    pool_angle_deg : float, optional
-        Agreement of two views' RANSAC rotations, degrees.
-    min_pool_support : int, optional
-        RANSAC inliers a view needs to be pooled.
-    refine : bool, optional
-        Estimate the pose from the kept correspondences (:func:`~nbcalib.initial_guess.
-        estimate.estimate_initial_guess`, confidence-weighted) and, when it succeeds, render one
-        more view *from that pose* (rotation and camera position: no parallax left, the view's
-        geometry is the camera image's), match it and add its correspondences.
     seed : int, optional
         RANSAC seed.
     name : str, optional
         Data name recorded in the correspondences.
     model_dir : str or os.PathLike, optional
         Exported models.
-    **match_options
-        Further keyword options of :func:`~nbcalib.matching.match_images` (``match_threshold``,
-        normalisations, ``max_keypoints``, ``threads``...).
+    **overrides
+        Attributes of :class:`MatchConfig` to change for this call.
 
     Returns
     -------
@@ -342,21 +238,23 @@ def match_views(
             f"points_lidar (N, 3) and intensities (N,) expected, got {points.shape}, {values.shape}"
         )
     t0 = time.perf_counter()
-    matcher = resolve_matcher(matcher, model_dir)
+    cfg = replace(config or MatchConfig(), **overrides)
+    cfg = replace(cfg, matcher=resolve_matcher(cfg.matcher, model_dir))
+    guess_config = guess_config or InitialGuessConfig()
     # the views' index maps are not hole-filled: reach the nearest point across a filled hole
-    search_radius = max(float(search_radius), float(fill_radius))
-    ppd = DEFAULT_PIXELS_PER_DEGREE if pixels_per_degree is None else float(pixels_per_degree)
+    search_radius = max(float(cfg.search_radius), float(cfg.fill_radius))
+    ppd = cfg.pixels_per_degree or DEFAULT_PIXELS_PER_DEGREE
     scale = view_scale(camera, ppd)
     translations = None
     if T_camera_lidar_prior is not None:
         T_prior = np.asarray(T_camera_lidar_prior, dtype=np.float64)
         if T_prior.shape != (4, 4) or not np.all(np.isfinite(T_prior)):
             raise ValueError("T_camera_lidar_prior must be a finite 4 x 4 matrix")
-        rotations = prior_rotations(T_prior[:3, :3], prior_yaw_offsets_deg)
+        rotations = prior_rotations(T_prior[:3, :3], cfg.prior_yaw_offsets_deg)
         # the prior's own view is rendered from the prior camera position
-        translations = [T_prior[:3, 3] if off == 0.0 else None for off in prior_yaw_offsets_deg]
+        translations = [T_prior[:3, 3] if off == 0.0 else None for off in cfg.prior_yaw_offsets_deg]
     else:
-        rotations = heading_rotations(n_headings)
+        rotations = heading_rotations(cfg.views)
 
     def render(R, t=None):
         return render_view(
@@ -366,9 +264,9 @@ def match_views(
             values,
             scale=scale,
             t_vcam_lidar=t,
-            fill_radius=fill_radius,
-            splat_pixels_at_1m=splat_pixels_at_1m,
-            median=median,
+            fill_radius=cfg.fill_radius,
+            splat_pixels_at_1m=cfg.splat_pixels_at_1m,
+            median=cfg.median,
         )
 
     def match(view):
@@ -377,20 +275,18 @@ def match_views(
             image,
             view,
             points,
-            matcher,
+            cfg,
             model_dir,
             search_radius,
             name,
-            ransac_iterations,
-            ransac_threshold,
+            guess_config.ransac_threshold,
             seed,
-            match_options,
         )
 
     results: list[ViewMatches] = []
     for k, R in enumerate(rotations):
         view = render(R, None if translations is None else translations[k])
-        if view.fill_fraction >= min_fill:
+        if view.fill_fraction >= cfg.min_fill:
             results.append(match(view))
     best = -1
     if results:
@@ -401,19 +297,19 @@ def match_views(
     if best >= 0:
         keep = [best]
         R0 = results[best].R_camera_lidar
-        if pool and R0 is not None:
+        if cfg.pool and R0 is not None:
             for k, v in enumerate(results):
                 if (
                     k != best
                     and v.R_camera_lidar is not None
-                    and v.ransac_inliers >= min_pool_support
+                    and v.ransac_inliers >= cfg.min_pool_support
                 ):
-                    if rotation_angle_deg(R0.T @ v.R_camera_lidar) < pool_angle_deg:
+                    if rotation_angle_deg(R0.T @ v.R_camera_lidar) < cfg.pool_angle_deg:
                         keep.append(k)
         pooled = tuple(keep)
         corr = pool_correspondences([results[k].correspondences for k in keep])
-        if refine:
-            extra = _refined_view(camera, corr, ransac_threshold, seed, render, match)
+        if cfg.refine_view:
+            extra = _refined_view(camera, corr, guess_config, seed, render, match)
             if extra is not None:
                 results.append(extra)
                 pooled = (*pooled, len(results) - 1)

@@ -1,0 +1,350 @@
+"""Command-line options, mapped onto the config tree (:mod:`nbcalib.config`).
+
+Each option names the setting it sets (``--voxel-size`` -> ``preprocess.voxel_size``); its
+default and type come from that setting's dataclass, so no default is written here. Options are
+added with ``argparse.SUPPRESS`` as default, so a namespace holds only what the user typed:
+:func:`build_config` lays the command line over a config file over a base config (the defaults,
+or the config a work directory recorded).
+
+The same table reads config files whose keys are option names (``voxel-size = 0.01``,
+``dynamic = true``), at the top level or in a stage's table (:func:`file_settings`).
+"""
+
+from __future__ import annotations
+
+import argparse
+from dataclasses import dataclass, fields
+from typing import Any
+
+from nbcalib.config import SECTIONS, CalibrationConfig, set_values
+from nbcalib.errors import InputError
+
+__all__ = [
+    "ASSESS",
+    "INITIAL_GUESS",
+    "INPUT_OPTIONS",
+    "MATCHING",
+    "PREPROCESS",
+    "REFINE",
+    "Option",
+    "add_options",
+    "build_config",
+    "file_settings",
+    "given_settings",
+]
+
+_FLAG = object()
+
+
+@dataclass(frozen=True)
+class Option:
+    """One command-line option and the setting it sets.
+
+    Attributes
+    ----------
+    flag : str
+        ``--voxel-size``.
+    setting : str
+        ``section.field`` (or ``seed``); empty for options that are not settings (inputs).
+    help : str
+        Help text; the default is appended from the setting.
+    metavar : str or None
+    value : object
+        For options without an argument (``--dynamic``): the value they set.
+    choices : tuple or None
+        Allowed values (default: none, or the setting's own).
+    """
+
+    flag: str
+    setting: str
+    help: str
+    metavar: str | None = None
+    value: Any = _FLAG
+    choices: tuple | None = None
+
+    @property
+    def dest(self) -> str:
+        """Namespace attribute: the flag without dashes (``voxel_size``)."""
+        return self.flag.lstrip("-").replace("-", "_")
+
+    @property
+    def takes_value(self) -> bool:
+        """The option reads an argument (``--bins 8``), as opposed to a switch."""
+        return self.value is _FLAG
+
+    def default(self):
+        """The setting's default (None for options that are not settings)."""
+        if not self.setting:
+            return None
+        section, _, name = self.setting.partition(".")
+        if not name:
+            return getattr(CalibrationConfig(), section)
+        return getattr(SECTIONS[section](), name)
+
+    def kind(self) -> str:
+        """The setting's base type: ``int``, ``float``, ``str`` or ``bool``."""
+        if not self.setting:
+            return "str"
+        section, _, name = self.setting.partition(".")
+        if not name:
+            return "int"
+        annotation = str(SECTIONS[section].__dataclass_fields__[name].type)
+        return next(p.strip() for p in annotation.split("|") if p.strip() != "None")
+
+
+def _number(kind: str):
+    def parse(text: str):
+        try:
+            return int(text) if kind == "int" else float(text)
+        except ValueError:
+            what = "an integer" if kind == "int" else "a number"
+            raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
+
+    return parse
+
+
+#: Inputs and camera (``preprocess`` and ``run``): not settings, recorded as the job's inputs.
+INPUT_OPTIONS = (
+    Option("--camera", "", "camera file (ROS camera_info YAML, OpenCV/nbcalib YAML, calib.json)",
+           "FILE"),
+    Option("--camera-model", "", "pinhole, plumb_bob, fisheye, ...", "M"),
+    Option("--intrinsics", "", "fx,fy,cx,cy[,xi]", "A,B,..."),
+    Option("--distortion", "", "distortion coefficients", "A,B,..."),
+)  # fmt: skip
+
+PREPROCESS = (
+    Option("--dynamic", "preprocess.mode", "moving spinning LiDAR (CT-ICP)", value="dynamic"),
+    Option("--static", "preprocess.mode", "LiDAR at rest (accumulate)", value="static"),
+    Option("--points-topic", "preprocess.points_topic", "bag topic of the point clouds", "T"),
+    Option("--image-topic", "preprocess.image_topic", "bag topic of the images", "T"),
+    Option("--camera-info-topic", "preprocess.camera_info_topic", "bag topic of CameraInfo", "T"),
+    Option("--intensity-channel", "preprocess.intensity_channel",
+           "point field of the intensity ('auto': reflectivity > intensity)", "C"),
+    Option("--voxel-size", "preprocess.voxel_size", "dense cloud voxel, metres", "M"),
+    Option("--min-distance", "preprocess.min_distance", "drop nearer points, metres", "M"),
+    Option("--frame-rate", "preprocess.frame_rate", "scans per second of files without times",
+           "HZ"),
+    Option("--max-scans", "preprocess.max_scans", "use at most N scans per pair", "N"),
+    Option("--no-equalize", "preprocess.equalize", "keep raw intensities and image", value=False),
+)  # fmt: skip
+
+MATCHING = (
+    Option("--matcher", "matching.matcher", "matcher ('auto': the best exported, else sift)"),
+    Option("--match-threshold", "matching.match_threshold",
+           "minimum match probability of a learned matcher (reference 0.01, paper 0.05)", "P"),
+    Option("--rotate-camera", "matching.rotate_camera",
+           "rotate the camera image clockwise before matching (0, 90, 180, 270)", "DEG"),
+    Option("--rotate-lidar", "matching.rotate_lidar",
+           "rotate the LiDAR image clockwise before matching (0, 90, 180, 270)", "DEG"),
+    Option("--camera-normalization", "matching.camera_normalization",
+           "normalisation of the camera image"),
+    Option("--lidar-normalization", "matching.lidar_normalization",
+           "normalisation of the LiDAR image"),
+    Option("--camera-scale", "matching.camera_scale",
+           "resample the camera image by S before matching the stored LiDAR image (default: the "
+           "ratio of the two images' pixels per degree)", "S"),
+    Option("--views", "matching.views",
+           "camera-shaped LiDAR views at N headings around the LiDAR (0: match the stored "
+           "LiDAR image instead, as the reference)", "N"),
+    Option("--search-radius", "matching.search_radius",
+           "LiDAR keypoints on empty pixels take the nearest LiDAR point within this radius, "
+           "pixels", "PX"),
+    Option("--no-picture", "matching.draw", "do not write <name>_matches.png", value=False),
+)  # fmt: skip
+
+INITIAL_GUESS = (
+    Option("--ransac-iterations", "initial_guess.ransac_iterations", "RANSAC hypotheses", "N"),
+    Option("--ransac-threshold", "initial_guess.ransac_threshold",
+           "inlier threshold on the reprojection error, pixels", "PX"),
+    Option("--robust-kernel-width", "initial_guess.robust_kernel_width",
+           "Cauchy kernel width of the LM refinement, pixels", "PX"),
+    Option("--seed", "seed", "seed of every random choice (RANSAC)", "S"),
+    Option("--min-inliers", "initial_guess.min_inliers",
+           "inliers needed to accept an automatic guess (manual picks: --min-manual-inliers)",
+           "N"),
+    Option("--min-manual-inliers", "initial_guess.min_manual_inliers",
+           "inliers needed to accept a guess from manual picks", "N"),
+    Option("--no-confidence-weights", "initial_guess.confidence_weights",
+           "weigh every match equally in the LM cost (paper Eq. 1, the reference) instead of "
+           "by the matcher's confidence", value=False),
+)  # fmt: skip
+
+REFINE = (
+    Option("--optimizer", "refine.optimizer",
+           "hybrid: Nelder-Mead over the pyramid, then L-BFGS; or either alone"),
+    Option("--bins", "refine.bins", "NID histogram bins", "N"),
+    Option("--max-outer", "refine.max_outer", "outer iterations at most", "N"),
+    Option("--depth-margin", "refine.depth_margin", "visibility depth margin, metres", "M"),
+    Option("--window", "refine.window", "visibility window half-size, pixels", "PX"),
+    Option("--no-hidden-point-removal", "refine.hidden_point_removal",
+           "use every point in the image", value=False),
+    Option("--pairs", "refine.max_pairs", "use only the first N pairs", "N"),
+    Option("--pyramid-levels", "refine.pyramid_levels",
+           "coarse image levels before the full resolution (0: full resolution only)", "N"),
+)  # fmt: skip
+
+ASSESS = (Option("--confidence", "assess.confidence", "confidence of the stated intervals", "P"),)
+
+#: Every option that sets a setting, by flag.
+SETTING_OPTIONS = {o.flag: o for o in (*PREPROCESS, *MATCHING, *INITIAL_GUESS, *REFINE, *ASSESS)}
+
+
+def _choices(option: Option):
+    if option.choices is not None:
+        return option.choices
+    from nbcalib.matching.config import MATCHER_CHOICES, NORMALIZATIONS, ROTATIONS
+    from nbcalib.registration.config import OPTIMIZERS
+
+    known = {
+        "matching.matcher": MATCHER_CHOICES,
+        "matching.camera_normalization": NORMALIZATIONS,
+        "matching.lidar_normalization": NORMALIZATIONS,
+        "matching.rotate_camera": ROTATIONS,
+        "matching.rotate_lidar": ROTATIONS,
+        "refine.optimizer": OPTIMIZERS,
+    }
+    return known.get(option.setting)
+
+
+def add_options(group, options) -> None:
+    """Add options to a parser or argument group, defaults left out of the namespace.
+
+    The help shows each setting's default, from its dataclass.
+    """
+    exclusive = {}
+    for option in options:
+        default = option.default()
+        help_text = option.help
+        if option.takes_value and default not in (None, False, ""):
+            help_text = f"{help_text} (default: {default})"
+        kwargs: dict[str, Any] = {"default": argparse.SUPPRESS, "help": help_text}
+        if option.takes_value:
+            kind = option.kind()
+            if kind in ("int", "float"):
+                kwargs["type"] = _number(kind)
+            kwargs["metavar"] = option.metavar
+            choices = _choices(option)
+            if choices is not None:
+                kwargs["choices"] = choices
+        else:
+            kwargs["action"] = "store_const"
+            kwargs["const"] = option.value
+        target = group
+        if option.setting == "preprocess.mode":  # --dynamic / --static exclude each other
+            if "mode" not in exclusive:
+                exclusive["mode"] = group.add_mutually_exclusive_group()
+            target = exclusive["mode"]
+        dest = "mode" if option.setting == "preprocess.mode" else option.dest
+        target.add_argument(option.flag, dest=dest, **kwargs)
+
+
+def given_settings(args: argparse.Namespace) -> dict[str, Any]:
+    """``{"section.field": value}`` of the setting options given on the command line."""
+    values = {}
+    given = vars(args)
+    for option in SETTING_OPTIONS.values():
+        dest = "mode" if option.setting == "preprocess.mode" else option.dest
+        if dest in given:
+            values[option.setting] = given[dest]
+    return values
+
+
+def file_settings(data: dict, path) -> tuple[dict, dict]:
+    """Split a config file (:func:`nbcalib.config.read_config_file`) into settings and the rest.
+
+    Keys are field names in a section's table (``[refine] bins = 8``) or option names anywhere
+    (``bins = 8``, ``[calibrate] optimizer = "lbfgs"``, ``dynamic = true``).
+
+    Returns
+    -------
+    settings : dict
+        ``{"section.field": value}``.
+    other : dict
+        Options that are not settings (``camera``, ``init``, ``no-report``, ``inputs`` ...), by
+        their namespace name (``no_report``), for the command to use.
+
+    Raises
+    ------
+    InputError
+        An unknown table or key, or a switch whose value is not true or false; names ``path``.
+    """
+    from nbcalib.commands import run as run_command
+
+    stage_tables = ("run", "preprocess", "find-matches", "initial-guess", "calibrate", "report")
+    others = {o.flag: o for o in (*INPUT_OPTIONS, *run_command.RUN_OPTIONS)}
+    settings: dict[str, Any] = {}
+    other: dict[str, Any] = {}
+    entries = []
+    for key, value in data.items():
+        if isinstance(value, dict) and key != "inputs":
+            if key not in SECTIONS and key not in stage_tables:
+                tables = ", ".join(sorted({*SECTIONS, *stage_tables}))
+                raise InputError(f"unknown table [{key}]: tables may be {tables}", path)
+            entries += [(key, k, v) for k, v in value.items()]
+        else:
+            entries.append((None, key, value))
+    for table, key, value in entries:
+        name = str(key).lstrip("-").replace("-", "_")
+        if table in SECTIONS and name in {f.name for f in fields(SECTIONS[table])}:
+            if isinstance(value, dict):  # a nested table: [preprocess.odometry]
+                from nbcalib.config import flatten
+
+                nested: dict[str, Any] = {}
+                flatten(f"{table}.{name}", value, nested)
+                for setting, item in nested.items():
+                    _put(settings, setting, item, path)
+            else:
+                _put(settings, f"{table}.{name}", value, path)
+            continue
+        if table is None and name in ("seed", "inputs"):
+            (settings if name == "seed" else other)[name] = value
+            continue
+        flag = "--" + name.replace("_", "-")
+        option = SETTING_OPTIONS.get(flag) or others.get(flag)
+        if option is None:
+            raise InputError(f"unknown option {flag} (see nbcalib run --help)", path)
+        if not option.takes_value:
+            if not isinstance(value, bool):
+                raise InputError(f"{flag} must be true or false, got {value!r}", path)
+            if not value:
+                continue
+            value = option.value
+        if option.setting:
+            _put(settings, option.setting, value, path)
+        else:
+            other[option.dest] = value
+    return settings, other
+
+
+def _put(settings: dict, setting: str, value, path) -> None:
+    if setting in settings and settings[setting] != value:
+        raise InputError(f"{setting} is given twice, with different values", path)
+    settings[setting] = value
+
+
+def build_config(
+    args: argparse.Namespace,
+    *,
+    base: CalibrationConfig | None = None,
+    file_values: dict | None = None,
+    file_path=None,
+) -> CalibrationConfig:
+    """The command line over a config file's settings over ``base`` (default: the defaults).
+
+    Raises
+    ------
+    InputError
+        A setting out of range (the message names the option or the file).
+    """
+    config = base or CalibrationConfig()
+    if file_values:
+        try:
+            config = set_values(config, file_values)
+        except ValueError as exc:
+            raise InputError(str(exc), file_path) from None
+    given = given_settings(args)
+    try:
+        return set_values(config, given)
+    except ValueError as exc:
+        flags = [o.flag for o in SETTING_OPTIONS.values() if o.setting in given]
+        raise InputError(f"{exc} (options: {' '.join(sorted(set(flags)))})") from None

@@ -1,0 +1,167 @@
+"""Settings of keypoint matching (paper section III-D, first step), importable without numba.
+
+:class:`MatchConfig` is the ``matching`` section of the pipeline's config
+(:class:`nbcalib.config.CalibrationConfig`): :func:`nbcalib.matching.match_images` and
+:func:`nbcalib.matching.find_correspondences` take their defaults from it, and so do the command
+line and config files.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+__all__ = ["LEARNED_MATCHER_NAMES", "MATCHER_CHOICES", "NORMALIZATIONS", "ROTATIONS", "MatchConfig"]
+
+#: Learned matchers, best first (ONNX graphs exported by ``nbcalib models export``).
+LEARNED_MATCHER_NAMES = ("xfeat-lighterglue", "aliked-lightglue", "disk-lightglue")
+#: Values of :attr:`MatchConfig.matcher`: ``auto`` picks the best exported one, else SIFT.
+MATCHER_CHOICES = ("auto", *LEARNED_MATCHER_NAMES, "sift")
+#: Image normalisations (:mod:`nbcalib.matching.normalize`).
+NORMALIZATIONS = ("none", "equalize", "clahe", "invert", "gradient")
+#: Clockwise image rotations before matching, degrees.
+ROTATIONS = (0, 90, 180, 270)
+
+
+@dataclass(frozen=True)
+class MatchConfig:
+    """How the camera image is matched with the LiDAR data and lifted to 2D-3D pairs.
+
+    Attributes
+    ----------
+    matcher : str
+        ``auto`` (the best exported learned matcher, else ``sift``), a learned matcher of
+        `LEARNED_MATCHER_NAMES`, or ``sift``.
+    match_threshold : float
+        Minimum match probability of a learned matcher (the reference's 0.01; the paper 0.05).
+    rotate_camera, rotate_lidar : int
+        Clockwise rotation of the camera / LiDAR image before matching (0, 90, 180, 270), e.g.
+        for a camera mounted upside down; keypoints are returned in the unrotated images.
+    camera_normalization, lidar_normalization : str
+        Image normalisation before matching (:data:`NORMALIZATIONS`): ``gradient`` (the
+        magnitude of the Sobel gradient) removes the sign of an edge, which differs between
+        reflectivity and brightness (docs/BENCHMARKS.md, "Matching").
+    camera_scale : float or None
+        Resample the camera image by this factor before matching a stored LiDAR image
+        (``views == 0``); None: the ratio of the two images' pixels per degree, so that both
+        have the same scale (the matchers are not invariant to a scale change of 2 or more).
+    max_image_side : int or None
+        Shrink both images by one common factor so that no side is longer, pixels (None: no
+        limit). The learned extractors' memory grows with the pixel count.
+    fill_radius : int
+        Fill empty LiDAR-image pixels from filled ones this close before matching, pixels.
+    detection_threshold : float or None
+        Keypoint score threshold of a learned extractor (None: the model's own).
+    max_keypoints : int or None
+        Keypoints per image at most (the strongest; None: all the model returns).
+    sift_ratio : float
+        Lowe's ratio of the SIFT fallback.
+    threads : int or None
+        onnxruntime intra-op threads (None: the number of cores).
+    views : int
+        Camera-shaped LiDAR views: the dense cloud is rendered through the real camera's model
+        at the LiDAR's angular resolution, at ``views`` level headings around the LiDAR (or a
+        few orientations around a prior), and the view with the most rotation-only RANSAC
+        inliers is kept (:mod:`nbcalib.matching.multiview`). 0: match the stored LiDAR image of
+        preprocessing instead, as the reference toolbox does.
+    prior_yaw_offsets_deg : tuple of float
+        Yaw offsets of the views around a prior, degrees.
+    pixels_per_degree : float or None
+        Angular resolution of the views (None:
+        :data:`~nbcalib.matching.views.DEFAULT_PIXELS_PER_DEGREE`; never above the camera's).
+    min_fill : float
+        Views with a smaller fraction of filled pixels are not matched.
+    splat_pixels_at_1m : float
+        Range-dependent splat of the views (0: off; :func:`~nbcalib.matching.views.render_view`).
+    median : int
+        Median filter of the view intensities, pixels (0: off).
+    search_radius : float
+        A LiDAR keypoint on an empty pixel takes the nearest LiDAR point within this radius,
+        pixels (raised to ``fill_radius`` for the views, whose holes are filled).
+    view_ransac_iterations : int
+        Rotation-only RANSAC hypotheses that score one view (its inlier threshold is the
+        initial guess's ``ransac_threshold``).
+    pool : bool
+        Add the correspondences of views whose RANSAC rotation agrees with the best view's.
+    pool_angle_deg : float
+        Agreement of two views' RANSAC rotations, degrees.
+    min_pool_support : int
+        RANSAC inliers a view needs to be pooled.
+    refine_view : bool
+        Estimate the pose from the kept correspondences and, when that succeeds, render and
+        match one more view from that pose (no parallax left).
+    draw : bool
+        Write ``<name>_matches.png`` (the matches drawn) into the work directory.
+    """
+
+    matcher: str = "auto"
+    match_threshold: float = 0.01
+    rotate_camera: int = 0
+    rotate_lidar: int = 0
+    camera_normalization: str = "gradient"
+    lidar_normalization: str = "gradient"
+    camera_scale: float | None = None
+    max_image_side: int | None = 2048
+    fill_radius: int = 2
+    detection_threshold: float | None = None
+    max_keypoints: int | None = 2048
+    sift_ratio: float = 0.8
+    threads: int | None = None
+    views: int = 12
+    prior_yaw_offsets_deg: tuple[float, ...] = (-20.0, 0.0, 20.0)
+    pixels_per_degree: float | None = None
+    min_fill: float = 0.05
+    splat_pixels_at_1m: float = 0.0
+    median: int = 0
+    search_radius: float = 2.0
+    view_ransac_iterations: int = 2048
+    pool: bool = True
+    pool_angle_deg: float = 2.0
+    min_pool_support: int = 6
+    refine_view: bool = True
+    draw: bool = True
+
+    def __post_init__(self):
+        object.__setattr__(
+            self, "prior_yaw_offsets_deg", tuple(float(v) for v in self.prior_yaw_offsets_deg)
+        )
+        if self.matcher not in MATCHER_CHOICES:
+            raise ValueError(
+                f"matcher must be one of {', '.join(MATCHER_CHOICES)}, got {self.matcher!r}"
+            )
+        for name in ("camera_normalization", "lidar_normalization"):
+            value = getattr(self, name)
+            if value not in NORMALIZATIONS:
+                raise ValueError(
+                    f"{name} must be one of {', '.join(NORMALIZATIONS)}, got {value!r}"
+                )
+        for name in ("rotate_camera", "rotate_lidar"):
+            if getattr(self, name) not in ROTATIONS:
+                raise ValueError(f"{name} must be 0, 90, 180 or 270, got {getattr(self, name)!r}")
+        if not math.isfinite(self.match_threshold):
+            raise ValueError(f"match_threshold must be finite, got {self.match_threshold}")
+        if self.camera_scale is not None and not (
+            math.isfinite(self.camera_scale) and 0.05 <= self.camera_scale <= 20.0
+        ):
+            raise ValueError(f"camera_scale must be in [0.05, 20], got {self.camera_scale}")
+        if self.max_image_side is not None and self.max_image_side < 16:
+            raise ValueError(f"max_image_side must be >= 16, got {self.max_image_side}")
+        if self.max_keypoints is not None and self.max_keypoints < 1:
+            raise ValueError(f"max_keypoints must be >= 1, got {self.max_keypoints}")
+        for name in ("fill_radius", "median", "views"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
+        for name in ("search_radius", "splat_pixels_at_1m", "pool_angle_deg"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be a finite number >= 0, got {value}")
+        if not 0.0 <= self.min_fill <= 1.0:
+            raise ValueError(f"min_fill must be in [0, 1], got {self.min_fill}")
+        if not 0.0 < self.sift_ratio <= 1.0:
+            raise ValueError(f"sift_ratio must be in (0, 1], got {self.sift_ratio}")
+        if self.view_ransac_iterations < 1 or self.min_pool_support < 1:
+            raise ValueError("view_ransac_iterations and min_pool_support must be >= 1")
+        if self.pixels_per_degree is not None and not self.pixels_per_degree > 0:
+            raise ValueError(f"pixels_per_degree must be > 0, got {self.pixels_per_degree}")
+        if self.threads is not None and self.threads < 1:
+            raise ValueError(f"threads must be >= 1, got {self.threads}")

@@ -1,0 +1,223 @@
+"""The matching stage: 2D-3D correspondences between a camera image and its dense cloud.
+
+:func:`find_correspondences` is what ``nbcalib find-matches``, ``nbcalib run`` and
+:func:`nbcalib.calibrate` run for each pair (paper section III-D, first step):
+
+- ``views > 0`` (default): the camera image is matched against camera-shaped LiDAR views, the
+  dense cloud rendered through the real camera's model (:mod:`nbcalib.matching.multiview`);
+  each view's keypoints are lifted through its own index map, so the matches *are* 2D-3D
+  correspondences;
+- ``views == 0``: the reference toolbox's way, the camera image against the stored LiDAR image
+  of the virtual camera, its keypoints lifted through the stored index map.
+
+Either way the result is a :class:`PairMatches`: the correspondences, and the same matches as
+the reference toolbox's ``<name>_matches.json`` holds them (:func:`reference_matches`), whose
+LiDAR keypoints are the integer pixels of the stored index map that show each point, so that
+the reference's ``initial_guess_auto`` (which truncates keypoints to pixels and reads the index
+map there) finds exactly these points.
+"""
+
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from nbcalib.camera import CameraModel
+from nbcalib.matching.config import MatchConfig
+from nbcalib.matching.correspondences import Correspondences, correspondences_from_matches
+from nbcalib.matching.matches import Matches
+
+__all__ = ["PairMatches", "find_correspondences", "reference_matches"]
+
+
+@dataclass(frozen=True, eq=False)
+class PairMatches:
+    """What matching found for one pair.
+
+    Attributes
+    ----------
+    name : str
+        The pair's data name.
+    correspondences : Correspondences
+        Camera pixels and the cloud rows / 3-D points they match.
+    matches : Matches
+        The same as keypoint matches against the stored LiDAR image (``<name>_matches.json``,
+        :func:`reference_matches`).
+    matcher : str
+        The matcher that ran.
+    views : MultiViewMatches or None
+        The per-view record with ``views > 0``.
+    seconds : float
+        Wall time.
+    """
+
+    name: str
+    correspondences: Correspondences
+    matches: Matches
+    matcher: str
+    views: object = None
+    seconds: float = 0.0
+
+    def summary(self) -> str:
+        """One line: what was matched and kept."""
+        corr = self.correspondences
+        if self.views is not None:
+            mv = self.views
+            best = mv.views[mv.best] if mv.best >= 0 else None
+            heading = "n/a" if best is None else f"{best.view.heading_deg:.0f} deg"
+            inliers = 0 if best is None else best.ransac_inliers
+            return (
+                f"{self.name}: {len(mv.views)} views, best heading {heading} (RANSAC inliers "
+                f"{inliers}), {len(corr)} correspondences kept ({self.matcher}, "
+                f"{self.seconds:.1f} s)"
+            )
+        return (
+            f"{self.name}: {corr.n_matches} matches, {len(corr)} lifted to 3-D points "
+            f"({self.matcher}, {self.seconds:.1f} s)"
+        )
+
+
+def reference_matches(
+    corr: Correspondences, index_map, *, matcher: str = "", info: dict | None = None
+) -> Matches:
+    """Correspondences as keypoint matches of the stored LiDAR image (reference file format).
+
+    Each correspondence's LiDAR keypoint is the pixel ``(u, v)`` (integers) of ``index_map``
+    that holds its cloud row; correspondences whose point the LiDAR image does not show
+    (hidden behind a nearer point, or an explicit 3-D point) are left out.
+
+    Parameters
+    ----------
+    corr : Correspondences
+        One pair's correspondences.
+    index_map : ndarray of shape (H, W), int32
+        The stored LiDAR image's index map (-1 empty).
+    matcher : str, optional
+        Recorded in the file.
+    info : dict, optional
+        Recorded under ``nbcalib`` in the file.
+
+    Returns
+    -------
+    Matches
+        One LiDAR keypoint per kept correspondence, matched in order.
+    """
+    index = np.asarray(index_map)
+    flat = index.reshape(-1)
+    filled = np.flatnonzero(flat >= 0)
+    rows = np.asarray(corr.point_index, dtype=np.int64)
+    size = int(max(flat.max(initial=-1), rows.max(initial=-1))) + 1
+    pixel_of = np.full(size, -1, dtype=np.int64)
+    pixel_of[flat[filled]] = filled
+    pixel = np.where(rows >= 0, pixel_of[np.clip(rows, 0, None)], -1) if size else rows
+    keep = pixel >= 0
+    v, u = np.divmod(pixel[keep], index.shape[1])
+    n = int(np.count_nonzero(keep))
+    confidence = corr.weights[keep] if corr.confidence is not None else np.ones(n)
+    return Matches(
+        corr.uv_camera[keep],
+        np.column_stack([u, v]).astype(np.float64),
+        np.arange(n, dtype=np.int64),
+        confidence,
+        matcher=matcher,
+        info=dict(info or {}),
+    )
+
+
+def find_correspondences(
+    camera: CameraModel,
+    pair,
+    config: MatchConfig | None = None,
+    *,
+    guess_config=None,
+    virtual_camera=None,
+    T_camera_lidar_prior=None,
+    seed: int = 0,
+    model_dir: str | os.PathLike | None = None,
+) -> PairMatches:
+    """Match one pair's camera image with its LiDAR data (module docstring).
+
+    Parameters
+    ----------
+    camera : CameraModel
+        The real camera.
+    pair : PairData
+        The pair after preprocessing and rendering (:mod:`nbcalib.products`).
+    config : MatchConfig, optional
+        Matcher and views.
+    guess_config : InitialGuessConfig, optional
+        Its ``ransac_threshold`` scores the views (:func:`~nbcalib.matching.multiview.
+        match_views`).
+    virtual_camera : VirtualCamera, optional
+        The camera of the stored LiDAR image: with ``views == 0`` its resolution sets the
+        camera image's scale (else ``config.camera_scale``, else 1).
+    T_camera_lidar_prior : array_like of shape (4, 4), optional
+        A rough extrinsic: views around it instead of the heading sweep.
+    seed : int, optional
+        RANSAC seed of the views.
+    model_dir : str or os.PathLike, optional
+        Exported models.
+
+    Returns
+    -------
+    PairMatches
+    """
+    from nbcalib.matching.match import camera_scale_for, match_images, resolve_matcher
+    from nbcalib.matching.multiview import match_views
+
+    cfg = config or MatchConfig()
+    t0 = time.perf_counter()
+    matcher = resolve_matcher(cfg.matcher, model_dir)
+    views = None
+    if cfg.views > 0 or T_camera_lidar_prior is not None:
+        views = match_views(
+            camera,
+            pair.image,
+            pair.points_lidar,
+            pair.intensities,
+            cfg,
+            matcher=matcher,
+            guess_config=guess_config,
+            T_camera_lidar_prior=T_camera_lidar_prior,
+            seed=seed,
+            name=pair.name,
+            model_dir=model_dir,
+        )
+        corr = views.correspondences
+        info = {
+            "mode": "views",
+            "views": [
+                {
+                    "heading_deg": round(v.view.heading_deg, 2),
+                    "matches": v.matches.num_matches,
+                    "lifted": len(v.correspondences),
+                    "ransac_inliers": v.ransac_inliers,
+                }
+                for v in views.views
+            ],
+            "best_view": views.best,
+            "pooled_views": list(views.pooled),
+        }
+    else:
+        scale = cfg.camera_scale
+        if scale is None and virtual_camera is not None:
+            scale = camera_scale_for(camera, virtual_camera.camera)
+        m = match_images(
+            pair.image,
+            pair.lidar_image.intensity,
+            cfg,
+            matcher=matcher,
+            camera_scale=scale,
+            model_dir=model_dir,
+        )
+        corr = correspondences_from_matches(
+            m, pair.lidar_index, pair.points_lidar, search_radius=cfg.search_radius, name=pair.name
+        )
+        info = {"mode": "lidar_image", **m.info}
+    seconds = time.perf_counter() - t0
+    info["seconds"] = round(seconds, 3)
+    matches = reference_matches(corr, pair.lidar_index, matcher=matcher, info=info)
+    return PairMatches(pair.name, corr, matches, matcher, views, seconds)

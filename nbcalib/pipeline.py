@@ -1,0 +1,652 @@
+"""The calibration pipeline: one job, stage by stage, in the order of the paper's method section.
+
+:class:`Calibrator` is the only orchestrator: ``nbcalib run``, ``nbcalib demo``, every stage
+command (``nbcalib preprocess``, ``find-matches``, ``initial-guess``, ``calibrate``,
+``report``) and :func:`nbcalib.calibrate` are thin shells over it, so a job gives the same
+result whichever door it comes in by. Its :meth:`~Calibrator.run` reads like the method::
+
+    preprocess    III-C  scans -> dense cloud per pair; equalised intensities and image
+    render        III-D  a virtual camera renders each cloud: LiDAR intensity image + index map
+    match         III-D  camera image x camera-shaped LiDAR views -> 2D-3D correspondences
+    initial guess III-D  rotation-only RANSAC + Cauchy-robust LM -> initial T_camera_lidar
+    refine        III-E  hidden-point removal + NID minimisation over all pairs -> T_camera_lidar
+    assess               NID curves, uncertainty and a verdict (the quality report)
+
+Each step hands a typed product to the next (:mod:`nbcalib.products`). With a work directory
+(:mod:`nbcalib.workdir`) every product is also saved, with a record of what made it (the config
+sections and inputs it used); a later run keeps each product whose record matches, and redoes
+the rest and everything after it. Without one the job runs in memory. Both compute the same
+numbers: products are exactly what the files hold (:mod:`nbcalib.products`).
+
+Example
+-------
+>>> from nbcalib.pipeline import Calibrator
+>>> from nbcalib.preprocess.inputs import InputSpec
+>>> spec = InputSpec(inputs=("scan.pcd", "image.png"), camera="camera.yaml")  # doctest: +SKIP
+>>> result = Calibrator(workdir="work").run(spec)                             # doctest: +SKIP
+>>> result.T_lidar_camera, result.quality.verdict                             # doctest: +SKIP
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import time
+
+import numpy as np
+
+from nbcalib.config import CalibrationConfig, config_to_dict, write_config
+from nbcalib.errors import InputError
+from nbcalib.io.calib_json import AUTO_STAGE, FINAL_STAGE, MANUAL_STAGE
+from nbcalib.products import CalibrationResult, Start, as_stored_values
+from nbcalib.resume import STAGES, plan_stages
+from nbcalib.workdir import WorkDir
+
+__all__ = ["STAGES", "Calibrator"]
+
+
+log = logging.getLogger("nbcalib.pipeline")
+
+
+def _plain(value):
+    """JSON-comparable copy (tuples to lists, paths to str)."""
+    return json.loads(json.dumps(value, default=str))
+
+
+class Calibrator:
+    """One calibration job (module docstring).
+
+    Parameters
+    ----------
+    config : CalibrationConfig, optional
+        Every setting (:mod:`nbcalib.config`); default ``CalibrationConfig()``.
+    workdir : str or os.PathLike or WorkDir, optional
+        Keep the products here and resume from them; default: in memory only.
+    model_dir : str or os.PathLike, optional
+        Exported matcher models (default: ``$NBCALIB_MODEL_DIR`` or the user cache).
+    """
+
+    def __init__(self, config: CalibrationConfig | None = None, *, workdir=None, model_dir=None):
+        self.config = config or CalibrationConfig()
+        self.work = (
+            None
+            if workdir is None
+            else (workdir if isinstance(workdir, WorkDir) else WorkDir(workdir))
+        )
+        self.model_dir = model_dir
+        self.camera = None
+        self.virtual = None
+        self.pairs = None
+        self.matches: dict = {}
+        self.guess = None
+        self.start: Start | None = None
+        self.refinement = None
+        self.quality = None
+        self.report = None
+        self.seconds: dict[str, float] = {}
+        self.ran: list[str] = []
+        self.skipped: list[str] = []
+        self._made: dict[str, dict] = {}
+        self._inputs_record = None
+        self._inputs = self._manual = self._prior = self._given = self._fallback = None
+        self._guess_failed = False
+        self._stage_t0 = time.perf_counter()
+        #: How the command line ran the job (``--init``...), recorded for ``nbcalib run WORKDIR``.
+        self.run_options: dict | None = None
+
+    # ================================================================ the method
+    def run(
+        self,
+        inputs=None,
+        *,
+        init: Start | None = None,
+        init_is_fallback: bool = False,
+        manual=None,
+        prior: Start | None = None,
+        only: str | None = None,
+        until: str | None = None,
+        redo_from: str | None = None,
+        overwrite: bool = True,
+        accept_failed_guess: bool = False,
+        skip: dict[str, str] | None = None,
+    ) -> CalibrationResult | None:
+        """Run (or keep) each stage in turn; returns the result once fine registration has one.
+
+        Parameters
+        ----------
+        inputs : InputSpec or ArrayInputs, optional
+            What to preprocess; may be left out when the work directory holds a preprocessed
+            job.
+        init : Start, optional
+            Start fine registration here instead of at an estimated guess (no matching), or,
+            with ``init_is_fallback``, only when the automatic guess fails.
+        manual : str or os.PathLike, optional
+            Hand-picked correspondences (:mod:`nbcalib.initial_guess.manual`) instead of
+            matching.
+        prior : Start, optional
+            A rough extrinsic that matching renders its views around.
+        only : str, optional
+            Run just this stage (:data:`STAGES`), its inputs taken from the work directory.
+        until : str, optional
+            Stop after this stage.
+        redo_from : str, optional
+            Recompute this stage and every later one, done or not.
+        overwrite : bool, optional
+            False: refuse (:class:`InputError`) to recompute a stage when the work directory
+            holds a finished result.
+        accept_failed_guess : bool, optional
+            Keep an initial guess that failed its success test instead of stopping.
+        skip : dict of str to str, optional
+            Stages to leave out, with the reason to show (``{"report": "--no-report"}``).
+
+        Raises
+        ------
+        InputError
+            A user error, or an automatic guess that failed (and no fallback was given).
+        """
+        fallback = init if init_is_fallback else None
+        given = None if init_is_fallback else init
+        self._inputs = inputs
+        self._manual, self._prior, self._given, self._fallback = manual, prior, given, fallback
+        self._accept_failed_guess, self._guess_failed = accept_failed_guess, False
+        skip = dict(skip or {})
+        if given is not None:
+            skip.setdefault("find-matches", f"starting from {given.source}")
+            skip.setdefault("initial-guess", f"starting from {given.source}")
+        elif manual is not None:
+            skip.setdefault("find-matches", "--manual")
+        plan = plan_stages(
+            self, only=only, until=until, redo_from=redo_from, overwrite=overwrite, skip=skip
+        )
+        for k, (stage, runs, reason) in enumerate(plan):
+            header = f"[{k + 1}/{len(plan)}] {stage}"
+            if not runs:
+                log.info("%s: skipped (%s)", header, reason)
+                self.skipped.append(stage)
+                continue
+            if self._guess_failed and stage == "initial-guess":
+                continue  # matching found nothing: the fallback start takes over
+            if only is None:  # a stage command needs no stage header
+                log.info("%s%s", header, f" ({reason})" if reason else "")
+            t0 = self._stage_t0 = time.perf_counter()
+            try:
+                self._run_stage(stage)
+            except InputError as exc:
+                if stage not in ("find-matches", "initial-guess") or fallback is None:
+                    raise
+                self._use_fallback(exc)
+            self.seconds[stage] = round(time.perf_counter() - t0, 3)
+            self.ran.append(stage)
+            if only is None:
+                log.info("    %s done in %.1f s", stage, self.seconds[stage])
+        return self.result()
+
+    def _use_fallback(self, exc: InputError) -> None:
+        """The automatic guess failed: record it, and start from the fallback pose instead."""
+        log.warning(
+            "automatic initial guess failed (%s): calibrating from %s instead",
+            exc,
+            self._fallback.source,
+        )
+        self._guess_failed = True
+        self._forget_after("initial-guess")
+        calib = self._calib()
+        if calib is not None:
+            calib.nbcalib.setdefault("initial_guess", {})["failed"] = str(exc)
+        self._remember("initial-guess", calib)
+
+    def _run_stage(self, stage: str) -> None:
+        if stage == "preprocess":
+            # III-C: scans -> dense cloud per pair; equalised intensities and image
+            pairs = self._preprocess()
+            # III-D: one virtual camera renders every cloud: LiDAR image + index map
+            self._render(pairs)
+        elif stage == "find-matches":
+            # III-D: camera image x camera-shaped LiDAR views -> 2D-3D correspondences
+            self._match()
+        elif stage == "initial-guess":
+            # III-D: rotation-only RANSAC, then Cauchy-robust LM -> initial T_camera_lidar
+            self._initial_guess()
+        elif stage == "calibrate":
+            # III-E: hidden-point removal + NID minimisation over all pairs
+            self._refine()
+        else:
+            # nbcalib: NID curves, uncertainty, verdict (and the HTML report)
+            self._assess()
+
+    # ================================================================ the steps
+    def _preprocess(self) -> list:
+        from nbcalib.preprocess.prepare import check_pairs, prepare_pair
+
+        if self._inputs is None or getattr(self._inputs, "empty", False):
+            where = self.work.path if self.work is not None else None
+            raise InputError(
+                "nothing to preprocess: give INPUT... WORKDIR (or --points FILE --image FILE)",
+                where,
+            )
+        pair_inputs, camera, data_path = self._inputs.gather(self.config.preprocess)
+        check_pairs(pair_inputs, camera)
+        if self.work is not None:
+            self.work.prepare()
+        self.camera, self._data_path, self._topics = camera, data_path, pair_inputs[0].topics
+        self._inputs_record = self._inputs.to_dict()
+        pairs = []
+        for k, pair in enumerate(pair_inputs):
+            log.info("    [%d/%d] %s", k + 1, len(pair_inputs), pair.name)
+            pairs.append(prepare_pair(pair, self.config.preprocess, log=_detail))
+        return pairs
+
+    def _render(self, pairs) -> None:
+        from nbcalib.preprocess.prepare import render_pairs
+        from nbcalib.workdir import make_calib, set_virtual_camera
+
+        self.virtual, self.pairs = render_pairs(pairs, log=_detail)
+        self._forget_after("preprocess")
+        if self.work is None:
+            return self._remember("preprocess")
+        for pair in self.pairs:
+            self.work.write_pair(pair)
+        topics = self._topics
+        calib = make_calib(
+            self.camera,
+            [p.name for p in self.pairs],
+            data_path=self._data_path,
+            camera_info_topic=topics.get("camera_info_topic", "N/A"),
+            image_topic=topics.get("image_topic", "N/A"),
+            points_topic=topics.get("points_topic", "N/A"),
+            intensity_channel=self.config.preprocess.intensity_channel,
+        )
+        set_virtual_camera(calib, self.virtual)
+        calib.nbcalib["preprocess"] = {
+            "pairs": {p.name: p.summary for p in self.pairs},
+            "lidar_fov_deg": self.virtual.fov_deg,
+        }
+        calib.nbcalib["inputs"] = self._inputs_record
+        self._remember("preprocess", calib)
+
+    def _match(self) -> None:
+        from nbcalib.matching.find import find_correspondences
+
+        camera, cfg = self._camera(), self.config
+        prior = self._prior.T_camera_lidar if self._prior is not None else None
+        self.matches = {}
+        for pair in self._pairs():
+            found = find_correspondences(
+                camera,
+                pair,
+                cfg.matching,
+                guess_config=cfg.initial_guess,
+                virtual_camera=self._virtual(),
+                T_camera_lidar_prior=prior,
+                seed=cfg.seed,
+                model_dir=self.model_dir,
+            )
+            _detail(found.summary())
+            self.matches[pair.name] = found
+            if self.work is not None:
+                self.work.write_matches(found, pair, draw=cfg.matching.draw)
+        self._forget_after("find-matches")
+        self._remember("find-matches", self._calib())
+
+    def _initial_guess(self) -> None:
+        from nbcalib.initial_guess.estimate import MIN_CORRESPONDENCES, estimate_initial_guess
+
+        cfg = self.config.initial_guess
+        corr, stage, where = self._guess_correspondences()
+        manual = self._manual is not None
+        if len(corr) < MIN_CORRESPONDENCES:
+            hint = (
+                "add more picks"
+                if manual
+                else "check the matches (nbcalib find-matches) or pick correspondences by hand "
+                "with --manual"
+            )
+            raise InputError(
+                f"too few correspondences: {len(corr)} (need at least {MIN_CORRESPONDENCES}); "
+                f"{hint}",
+                where,
+            )
+        guess = estimate_initial_guess(
+            self._camera(),
+            corr.uv_camera,
+            corr.points_lidar,
+            cfg,
+            seed=self.config.seed,
+            weights=corr.weights if cfg.confidence_weights else None,
+            min_inliers=cfg.min_manual_inliers if manual else cfg.min_inliers,
+        )
+        self.guess, self._guess_corr = guess, corr
+        _detail(guess.summary())
+        if not guess.success and not self._accept_failed_guess:
+            hint = "--force writes it anyway" if manual else "pick correspondences with --manual"
+            raise InputError(f"initial guess not written: {guess.failure} ({hint})", where)
+        self.start = Start.from_matrix(guess.T_camera_lidar, stage)
+        self._forget_after("initial-guess")
+        calib = self._calib()
+        if calib is not None:
+            calib.set_T_camera_lidar(stage, self.start.T_camera_lidar)
+            calib.nbcalib.setdefault("initial_guess", {})[stage] = {
+                "correspondences": len(corr),
+                "ransac_inliers": guess.ransac.n_inliers,
+                "inliers": guess.n_inliers,
+                "rms_px": None if not np.isfinite(guess.rms_px) else round(guess.rms_px, 4),
+                "support": guess.support,
+                "runner_up": guess.runner_up,
+                "success": bool(guess.success),
+                "seed": self.config.seed,
+                "confidence_weights": bool(cfg.confidence_weights and corr.confidence is not None),
+                "source": str(self._manual) if manual else "matches",
+            }
+        self._remember("initial-guess", calib)
+
+    def _refine(self) -> None:
+        from nbcalib.registration.refine import refine
+
+        cfg = self.config.refine
+        start = self._start_pose()
+        pairs = self._registration_pairs()
+        log.info(
+            "    calibrating %d pair(s), %d points, %s, start: %s",
+            len(pairs),
+            sum(len(p.points_lidar) for p in pairs),
+            cfg.optimizer,
+            start.source,
+        )
+
+        def progress(i, step):
+            _detail(
+                f"outer {i + 1} (level {step.level}): NID {step.nid_start:.5f} -> {step.nid:.5f}"
+                f"  {step.iterations} it, {step.evaluations} evals, moved "
+                f"{100 * step.translation_change:.2f} cm {step.rotation_change_deg:.3f} deg, "
+                f"{sum(step.visible_points)} visible points, {step.seconds:.1f} s"
+            )
+
+        t0 = time.perf_counter()
+        self.refinement = refine(pairs, start.T_camera_lidar, cfg, progress=progress)
+        self.start = start
+        self._forget_after("calibrate")
+        calib = self._calib()
+        if calib is not None:
+            from nbcalib.transforms import invert_T, pose_error
+
+            result = self.refinement
+            dt, dr = pose_error(invert_T(result.T_camera_lidar), invert_T(start.T_camera_lidar))
+            calib.set_T_camera_lidar(FINAL_STAGE, result.T_camera_lidar)
+            calib.nbcalib["calibration"] = {
+                "start": start.source,
+                "start_T_lidar_camera": start.values,
+                "optimizer": cfg.optimizer,
+                "bins": cfg.bins,
+                "pyramid_levels": cfg.pyramid_levels,
+                "pairs": [p.name for p in pairs],
+                "nid": result.nid,
+                "nid_start": result.history[0].nid_start,
+                "nid_history": [result.history[0].nid_start, *(h.nid for h in result.history)],
+                "outer_iterations": len(result.history),
+                "iterations": result.iterations,
+                "evaluations": result.evaluations,
+                "converged": result.converged,
+                "stopped": result.stopped,
+                "seconds": round(time.perf_counter() - t0, 3),
+                "change_from_start": {"translation_m": float(dt), "rotation_deg": float(dr)},
+            }
+        self._remember("calibrate", calib)
+
+    def _assess(self) -> None:
+        from nbcalib.report.quality import assess
+
+        T, start = self._result_pose(), self._start_pose()
+        pairs = self._registration_pairs()
+        converged = None if self.refinement is None else self.refinement.converged
+        if converged is None and self.work is not None:
+            info = self._calib().nbcalib.get("calibration", {})
+            converged = info.get("converged") if isinstance(info.get("converged"), bool) else None
+        self.quality = assess(
+            pairs,
+            T,
+            T_init=None if start is None else start.T_camera_lidar,
+            config=self.config.refine,
+            converged=converged,
+            assess_config=self.config.assess,
+        )
+        _detail(f"verdict: {self.quality.verdict}")
+        if self.work is None:
+            return self._remember("report")
+        from nbcalib.report.html import write_report
+
+        names = [p.name for p in pairs]
+        loaded = [p for p in self._pairs() if p.name in names]
+        self.report = write_report(
+            self.work,
+            self.quality,
+            loaded,
+            pairs,
+            T,
+            None if start is None else start.T_camera_lidar,
+            self.config.refine,
+            None if start is None else start.source,
+        )
+        self._remember("report", self._calib())
+
+    # ================================================================ products
+    def result(self) -> CalibrationResult | None:
+        """The job's result so far (None before fine registration has run or been loaded)."""
+        if self.refinement is None and (self.work is None or not self._has(FINAL_STAGE)):
+            return None
+        start = self._start_pose(required=False)
+        values = self.result_values if self.refinement is not None else None
+        values = values or self.work.read_calib().results[FINAL_STAGE]
+        return CalibrationResult(
+            values=tuple(values),
+            T_camera_lidar=self._result_pose(),
+            T_init=None if start is None else start.T_camera_lidar,
+            init_source="" if start is None else start.source,
+            initial_guess=self.guess,
+            pairs=list(self.pairs or []),
+            refinement=self.refinement,
+            camera=self.camera,
+            quality=self.quality,
+            matches=list(self.matches.values()),
+            virtual_camera=self.virtual,
+            workdir=None if self.work is None else self.work.path,
+            seconds=dict(self.seconds),
+        )
+
+    @property
+    def result_values(self) -> list[float]:
+        """Fine registration's result as ``calib.json`` holds it: ``T_lidar_camera`` 7 values."""
+        return as_stored_values(self.refinement.T_camera_lidar)
+
+    @property
+    def T_result(self) -> np.ndarray:
+        """Fine registration's ``T_camera_lidar`` from its stored values.
+
+        These are the bits a stage run on its own reads back from ``calib.json``.
+        """
+        return Start.from_values(self.result_values, FINAL_STAGE).T_camera_lidar
+
+    def _calib(self):
+        return None if self.work is None else self.work.read_calib()
+
+    def _has(self, stage: str) -> bool:
+        calib = self._calib()
+        return calib is not None and calib.has_result(stage)
+
+    def _camera(self):
+        if self.camera is None:
+            self.camera = self.work.require_preprocessed().camera_model()
+        return self.camera
+
+    def _virtual(self):
+        if self.virtual is None and self.work is not None:
+            from nbcalib.workdir import get_virtual_camera
+
+            self.virtual = get_virtual_camera(self.work.read_calib())
+        return self.virtual
+
+    def _pairs(self) -> list:
+        if self.pairs is None:
+            self.work.require_preprocessed()
+            self.pairs = self.work.load_pairs()
+        return self.pairs
+
+    def _registration_pairs(self) -> list:
+        from nbcalib.registration.refine import RegistrationPair
+
+        pairs = self._pairs()
+        if self.config.refine.max_pairs is not None:
+            pairs = pairs[: self.config.refine.max_pairs]
+        camera = self._camera()
+        return [
+            RegistrationPair(camera, p.image, p.points_lidar, p.intensities, p.name) for p in pairs
+        ]
+
+    def _guess_correspondences(self):
+        """(pooled correspondences, calib.json stage, path for messages) for the initial guess."""
+        from nbcalib.matching.correspondences import pool_correspondences
+
+        search_radius = self.config.matching.search_radius
+        if self._manual is not None:
+            from nbcalib.initial_guess.manual import (
+                read_manual_correspondences,
+                resolve_manual_correspondences,
+            )
+
+            entries = read_manual_correspondences(self._manual)
+            corr = resolve_manual_correspondences(
+                entries, self._pairs(), search_radius=search_radius, path=self._manual
+            )
+            _detail(f"{len(corr)} manual correspondences from {self._manual}")
+            self._guess_parts = [corr]
+            return corr, MANUAL_STAGE, self._manual
+        parts = []
+        for pair in self._pairs():
+            if pair.name in self.matches:
+                part = self.matches[pair.name].correspondences
+            else:
+                part = self.work.read_correspondences(pair, search_radius=search_radius)
+            log.debug(
+                "    %s: %d matches, %d 2D-3D correspondences", pair.name, part.n_matches, len(part)
+            )
+            parts.append(part)
+        where = self.work.path if self.work is not None else None
+        self._guess_parts = parts
+        return pool_correspondences(parts), AUTO_STAGE, where
+
+    def _start_pose(self, *, required: bool = True) -> Start | None:
+        """Where fine registration starts (or started), in this order of precedence.
+
+        A pose given as the start; this run's guess; the fallback pose when the guess failed;
+        the start a finished result records; the latest guess in ``calib.json``.
+        """
+        if self._given is not None:
+            return self._given
+        if self.start is not None:
+            return self.start
+        if self._guess_failed and self._fallback is not None:
+            return self._fallback
+        calib = self._calib()
+        if calib is not None:
+            info = calib.nbcalib.get("calibration") or {}
+            stored = info.get("start_T_lidar_camera")
+            if calib.has_result(FINAL_STAGE) and isinstance(stored, list) and len(stored) == 7:
+                return Start.from_values(stored, str(info.get("start", "start")))
+            stage = calib.latest_initial_stage()
+            if stage is not None:
+                return Start.from_matrix(calib.get_T_camera_lidar(stage), stage)
+        if self._fallback is not None:
+            return self._fallback
+        if not required:
+            return None
+        raise InputError(
+            "no initial guess in calib.json: run nbcalib initial-guess first, or pass --init",
+            None if self.work is None else self.work.calib_path,
+        )
+
+    def _result_pose(self) -> np.ndarray:
+        if self.refinement is not None:
+            return self.T_result
+        calib = self.work.read_calib()
+        if not calib.has_result(FINAL_STAGE):
+            raise InputError(
+                "no calibration result (results.T_lidar_camera): run nbcalib calibrate first",
+                self.work.calib_path,
+            )
+        return calib.get_T_camera_lidar(FINAL_STAGE)
+
+    # ================================================================ records
+    def recipe(self, stage: str) -> dict:
+        """What ``stage``'s product depends on: the config sections and inputs it uses."""
+        c = config_to_dict(self.config)
+        if stage == "preprocess":
+            inputs = None if self._inputs is None else self._inputs.to_dict()
+            return _plain({"inputs": inputs, "preprocess": c["preprocess"]})
+        if stage == "find-matches":
+            from nbcalib.matching.match import resolve_matcher
+
+            return _plain(
+                {
+                    "matching": c["matching"],
+                    "matcher": resolve_matcher(self.config.matching.matcher, self.model_dir),
+                    "ransac_threshold": self.config.initial_guess.ransac_threshold,
+                    "seed": c["seed"],
+                    "prior": None if self._prior is None else self._prior.values,
+                }
+            )
+        if stage == "initial-guess":
+            manual = None if self._manual is None else str(self._manual)
+            return _plain(
+                {"initial_guess": c["initial_guess"], "seed": c["seed"], "manual": manual}
+            )
+        if stage == "calibrate":
+            given = None if self._given is None else self._given.values
+            return _plain({"refine": c["refine"], "start": given})
+        return _plain({"assess": c["assess"], "refine": c["refine"]})
+
+    def _remember(self, stage: str, calib=None) -> None:
+        """Record what made ``stage``'s product (in memory, and in calib.json when given)."""
+        recipe = self.recipe(stage)
+        self._made[stage] = recipe
+        if calib is None:
+            return
+        calib.nbcalib.setdefault("made", {})[stage] = recipe
+        calib.nbcalib["config"] = config_to_dict(self.config)
+        if self._inputs_record is not None or "inputs" not in calib.nbcalib:
+            calib.nbcalib["inputs"] = self._inputs_record or calib.nbcalib.get("inputs")
+        elapsed = time.perf_counter() - self._stage_t0
+        calib.nbcalib.setdefault("seconds", {})[stage] = round(elapsed, 3)
+        if self.run_options is not None:
+            calib.nbcalib["run"] = _plain(self.run_options)
+        self.work.write_calib(calib)
+        write_config(self.work.config_path, self.config, {"inputs": calib.nbcalib["inputs"]})
+
+    def _forget_after(self, stage: str) -> None:
+        """A stage ran: what later stages made from its old product no longer holds.
+
+        Their records go, and in the work directory their results too (an automatic guess
+        from old matches, a result from an old guess), with the report and exports: nothing
+        stale is left that looks finished.
+        """
+        later = STAGES[STAGES.index(stage) + 1 :]
+        for name in later:
+            self._made.pop(name, None)
+        calib = self._calib() if self.work is not None and self.work.is_complete() else None
+        if calib is None or stage == "report":
+            return
+        self.work.remove_derived()
+        for name in later:
+            (calib.nbcalib.get("made") or {}).pop(name, None)
+        stale = {"find-matches": (AUTO_STAGE, FINAL_STAGE), "initial-guess": (FINAL_STAGE,)}
+        for result in stale.get(stage, ()):
+            calib.results.pop(result, None)
+            for key in ("result_times", "result_values"):
+                (calib.nbcalib.get(key) or {}).pop(result, None)
+        if stage in ("find-matches", "initial-guess"):
+            (calib.nbcalib.get("initial_guess") or {}).pop("failed", None)
+            calib.nbcalib.pop("calibration", None)
+        calib.nbcalib.pop("quality", None)
+        self.work.write_calib(calib)
+
+
+def _detail(line: str) -> None:
+    log.info("    %s", line)

@@ -1,0 +1,288 @@
+"""What a calibration is made from: bags or plain files, gathered into pairs of scans + image.
+
+The reference toolbox's ``preprocess`` (bags) and ``preprocess_map`` (plain files) take their
+inputs in two forms, and so does nbcalib, without ROS:
+
+- **bags** (ROS 1 ``.bag``, ROS 2 folders with sqlite3 or mcap): each bag is one pair, its point
+  clouds in time order, its first image and its camera info (:func:`gather_bag`);
+- **plain files**: point clouds (``.pcd``, ``.ply``, KITTI ``.bin``, ``.npy``/``.npz``) in time
+  order and one image (:func:`gather_files`).
+
+:class:`InputSpec` is the user's description of the inputs (paths and camera options, as typed
+on the command line); :meth:`InputSpec.gather` reads them into :class:`PairInput` objects and
+resolves the camera. The spec is recorded in the work directory, so that ``nbcalib run WORKDIR``
+can continue a job with the inputs it was started with.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from nbcalib.camera import CameraModel
+from nbcalib.errors import InputError
+from nbcalib.preprocess.config import PreprocessConfig
+
+__all__ = [
+    "BAG_SUFFIXES",
+    "CLOUD_SUFFIXES",
+    "IMAGE_SUFFIXES",
+    "InputSpec",
+    "PairInput",
+    "classify_inputs",
+    "gather_bag",
+    "gather_files",
+]
+
+CLOUD_SUFFIXES = (".pcd", ".ply", ".bin", ".npy", ".npz")
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
+BAG_SUFFIXES = (".bag", ".db3", ".mcap")
+
+#: Data name of a pair of plain files (as the reference's ``preprocess_map``).
+PLAIN_FILES_NAME = "000000"
+
+
+@dataclass
+class PairInput:
+    """What one pair is made from: scans in time order, one image, and where they came from.
+
+    Attributes
+    ----------
+    name : str
+        Data name (a bag's name, or ``000000``).
+    scans : list of PointCloud
+        The scans (:class:`nbcalib.io.pointcloud.PointCloud`), in time order.
+    image : ndarray of shape (H, W), uint8 or float
+        The camera image, grey.
+    image_source : str
+        Where the image came from, for messages.
+    camera : CameraModel or None
+        The camera info of a bag.
+    topics : dict of str to str
+        The bag topics used (``points_topic``, ``image_topic``, ``camera_info_topic``).
+    """
+
+    name: str
+    scans: list
+    image: np.ndarray
+    image_source: str
+    camera: CameraModel | None = None
+    topics: dict[str, str] = field(default_factory=dict)
+
+
+def classify_inputs(
+    paths: Sequence[str | os.PathLike],
+) -> tuple[list[Path], list[Path], list[Path]]:
+    """Split input paths into (bags, point cloud files, image files) by suffix / folder layout."""
+    bags, clouds, images = [], [], []
+    for raw in paths:
+        p = Path(raw)
+        suffix = p.suffix.lower()
+        if p.is_dir() or suffix in BAG_SUFFIXES:
+            bags.append(p)
+        elif suffix in CLOUD_SUFFIXES:
+            clouds.append(p)
+        elif suffix in IMAGE_SUFFIXES:
+            images.append(p)
+        elif not p.exists():
+            raise InputError("no such file or folder", path=p)
+        else:
+            raise InputError(
+                f"unknown input type '{suffix}': expected a bag (.bag, ROS 2 folder, .db3, .mcap), "
+                f"a point cloud ({', '.join(CLOUD_SUFFIXES)}) or an image "
+                f"({', '.join(IMAGE_SUFFIXES)})",
+                path=p,
+            )
+    return bags, clouds, images
+
+
+def _bag_name(path: Path) -> str:
+    # the reference keeps the .bag suffix of ROS 1 bags and uses a ROS 2 folder's name
+    if path.suffix.lower() == ".bag":
+        return path.name
+    return path.stem if path.is_file() else path.name
+
+
+def gather_bag(path, config: PreprocessConfig) -> PairInput:
+    """Read one bag: every point cloud of the points topic, the first image, the camera info."""
+    from nbcalib.io.bag import open_bag
+
+    path = Path(path)
+    with open_bag(path) as bag:
+        points_topic = bag.select_topic("point cloud", config.points_topic)
+        image_topic = bag.select_topic("image", config.image_topic)
+        camera = None
+        try:
+            info_topic = bag.select_topic("camera info", config.camera_info_topic)
+            camera = bag.camera_info(info_topic)
+        except InputError:
+            if config.camera_info_topic is not None:
+                raise
+            info_topic = "N/A"
+        image = None
+        for _, img in bag.images(image_topic, grey=True):
+            image = img
+            break
+        if image is None:
+            raise InputError(f"image topic {image_topic} has no messages", path=path)
+        scans = []
+        for _, cloud in bag.pointclouds(points_topic, intensity_channel=config.intensity_channel):
+            scans.append(cloud)
+            if config.max_scans is not None and len(scans) >= config.max_scans:
+                break
+    if not scans:
+        raise InputError(f"point cloud topic {points_topic} has no messages", path=path)
+    topics = {
+        "points_topic": points_topic,
+        "image_topic": image_topic,
+        "camera_info_topic": info_topic,
+    }
+    return PairInput(_bag_name(path), scans, image, f"{path} {image_topic}", camera, topics)
+
+
+def gather_files(
+    cloud_paths, image_path, config: PreprocessConfig, *, name: str = PLAIN_FILES_NAME
+) -> PairInput:
+    """Plain files: point clouds in the given (time) order and one image."""
+    from nbcalib.io.image import read_image
+    from nbcalib.io.pointcloud import read_pointcloud
+
+    if not cloud_paths:
+        raise InputError("no point cloud file given (.pcd, .ply, .bin, .npy, .npz)")
+    paths = [Path(p) for p in cloud_paths]
+    if config.max_scans is not None:
+        paths = paths[: config.max_scans]
+    channel = config.intensity_channel
+    scans = [read_pointcloud(p, intensity_channel=channel) for p in paths]
+    image_path = Path(image_path)
+    if not image_path.is_file():
+        raise InputError("image not found", path=image_path)
+    image = read_image(image_path, grey=True)
+    return PairInput(name, scans, image, str(image_path))
+
+
+def _numbers(text: str | None, option: str) -> list[float]:
+    if text is None or str(text).strip() == "":
+        return []
+    try:
+        return [float(v) for v in str(text).split(",")]
+    except ValueError:
+        raise InputError(f"{option} must be comma-separated numbers, got {text!r}") from None
+
+
+@dataclass(frozen=True)
+class InputSpec:
+    """The inputs of a job as the user gives them (command line: ``INPUT...``, ``--points``...).
+
+    Attributes
+    ----------
+    inputs : tuple of str
+        Bags, or point cloud files and one image.
+    points : tuple of str
+        More point cloud files (``--points``).
+    image : str or None
+        The image for ``points`` (``--image``).
+    camera : str or None
+        A camera file: ROS camera_info YAML, nbcalib/OpenCV camera YAML/JSON, or a calib.json.
+    camera_model, intrinsics, distortion : str or None
+        The camera by its parameters (``plumb_bob``, ``fx,fy,cx,cy``, ``k1,k2,...``).
+    """
+
+    inputs: tuple[str, ...] = ()
+    points: tuple[str, ...] = ()
+    image: str | None = None
+    camera: str | None = None
+    camera_model: str | None = None
+    intrinsics: str | None = None
+    distortion: str | None = None
+
+    def __post_init__(self):
+        object.__setattr__(self, "inputs", tuple(str(p) for p in self.inputs))
+        object.__setattr__(self, "points", tuple(str(p) for p in self.points))
+
+    @property
+    def empty(self) -> bool:
+        """No input at all."""
+        return not (self.inputs or self.points)
+
+    def to_dict(self) -> dict:
+        """JSON-ready form with absolute paths (:meth:`from_dict` reads it back).
+
+        Absolute, so that a job continued from another folder finds its inputs, and the same
+        inputs typed from another folder are recognised as the same.
+        """
+
+        def absolute(path):
+            return None if path is None else str(Path(path).absolute())
+
+        data = asdict(self)
+        data["inputs"] = [absolute(p) for p in self.inputs]
+        data["points"] = [absolute(p) for p in self.points]
+        data["image"], data["camera"] = absolute(self.image), absolute(self.camera)
+        return data
+
+    @classmethod
+    def from_dict(cls, data: dict) -> InputSpec:
+        """Inverse of :meth:`to_dict`; unknown keys are ignored."""
+        known = {k: data[k] for k in cls.__dataclass_fields__ if data.get(k) is not None}
+        return cls(**known)
+
+    def gather(self, config: PreprocessConfig) -> tuple[list[PairInput], CameraModel, str]:
+        """Read the inputs: (pairs, camera, data_path).
+
+        Raises
+        ------
+        InputError
+            Missing, unknown or corrupt inputs, bags mixed with plain files, not exactly one
+            image for plain files, or no camera (the message says which option gives one).
+        """
+        bags, clouds, images = classify_inputs(self.inputs)
+        clouds += [Path(p) for p in self.points]
+        if self.image:
+            images.append(Path(self.image))
+        if bags and (clouds or images):
+            raise InputError("give either bags or plain files (point clouds + image), not both")
+        if bags:
+            pairs = [gather_bag(b, config) for b in sorted(bags, key=lambda p: p.name)]
+            data_path = str(Path(bags[0]).resolve().parent)
+        else:
+            if len(images) != 1:
+                raise InputError(
+                    f"plain files need exactly one image (.png/.jpg), got {len(images)}"
+                    + ("" if images else "; add --image FILE")
+                )
+            pairs = [gather_files(clouds, images[0], config)]
+            data_path = str(Path(clouds[0]).resolve().parent) if clouds else ""
+        camera = self.camera_for(pairs[0].image.shape) or pairs[0].camera
+        if camera is None:
+            raise InputError(
+                f"{pairs[0].name}: no camera info found; give the camera with --camera FILE or "
+                "--camera-model/--intrinsics/--distortion"
+            )
+        return pairs, camera, data_path
+
+    def camera_for(self, image_shape) -> CameraModel | None:
+        """The camera the spec names (a file or parameters), sized like the image; else None."""
+        from nbcalib.camera import canonical_model_name, create_camera
+        from nbcalib.io.camera_file import load_camera
+
+        height, width = image_shape[:2]
+        if self.camera:
+            return load_camera(self.camera, width=width, height=height)
+        if not self.camera_model:
+            if self.intrinsics or self.distortion:
+                raise InputError("--intrinsics/--distortion need --camera-model")
+            return None
+        try:
+            model = canonical_model_name(self.camera_model)
+            intrinsics = _numbers(self.intrinsics, "--intrinsics")
+            if model == "equirectangular" and not intrinsics:
+                intrinsics = [width, height]  # as the reference: the image size
+            distortion = _numbers(self.distortion, "--distortion")
+            return create_camera(model, intrinsics, distortion, width, height)
+        except ValueError as exc:
+            raise InputError(str(exc)) from None

@@ -1,0 +1,209 @@
+"""The preprocessing and render stages: scans -> dense cloud -> LiDAR image (paper III-C, III-D).
+
+- :func:`prepare_pair`: one pair's scans accumulated into a dense cloud, static (LiDAR at rest,
+  non-repetitive scan) or dynamic (continuous-time ICP for a moving spinning LiDAR,
+  :mod:`nbcalib.odometry`); LiDAR intensities rank-equalised and the camera image
+  histogram-equalised (both optional). The cloud is kept at float32 precision, as the work
+  directory's PLY stores it, so that in-memory and on-disk jobs compute the same numbers.
+- :func:`render_pairs`: one virtual camera chosen from the first pair's field of view (pinhole
+  under 150 degrees, else equirectangular), and every pair's LiDAR intensity image and index map
+  rendered with it (z-buffer, nearest point per pixel).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import replace
+
+import numpy as np
+
+from nbcalib.camera import CameraModel
+from nbcalib.errors import InputError
+from nbcalib.preprocess.config import PreprocessConfig
+from nbcalib.preprocess.inputs import PairInput
+from nbcalib.products import PairData, VirtualCamera
+
+__all__ = ["check_pairs", "choose_mode", "prepare_pair", "render_pairs"]
+
+
+def _azimuth_coverage_deg(points: np.ndarray) -> float:
+    az = np.degrees(np.arctan2(points[:, 1], points[:, 0]))
+    return float(np.unique(np.floor(az).astype(np.int64)).size)
+
+
+def choose_mode(pair: PairInput, config: PreprocessConfig) -> str:
+    """``static`` or ``dynamic`` for this pair (``config.mode``, or the ``auto`` rule)."""
+    if config.mode != "auto":
+        return config.mode
+    if len(pair.scans) < 2:
+        return "static"
+    return "dynamic" if _azimuth_coverage_deg(pair.scans[0].points) > 180 else "static"
+
+
+def check_pairs(pairs: Sequence[PairInput], camera: CameraModel) -> None:
+    """Refuse inputs that cannot make a work directory (message names the pair or file).
+
+    Checks: at least one pair, unique names, one camera for all bags, images of the camera's
+    size, scans that hold points and intensities.
+    """
+    if not pairs:
+        raise InputError("nothing to preprocess: no bag and no point cloud given")
+    names = [p.name for p in pairs]
+    if len(set(names)) != len(names):
+        raise InputError(f"two inputs have the same name: {names}")
+    first = pairs[0].camera
+    for pair in pairs:
+        if pair.camera is not None and first is not None and pair.camera != first:
+            raise InputError(
+                f"pair '{pair.name}' has another camera than '{pairs[0].name}' "
+                "(mixed sensors across bags?)"
+            )
+        h, w = pair.image.shape[:2]
+        if (w, h) != (camera.width, camera.height):
+            raise InputError(
+                f"the image is {w} x {h} but the camera is {camera.width} x {camera.height}",
+                path=pair.image_source,
+            )
+        for i, scan in enumerate(pair.scans):
+            if scan.points.shape[0] == 0:
+                raise InputError(f"scan {i} of pair '{pair.name}' holds no finite point")
+        if all(scan.intensity is None for scan in pair.scans):
+            raise InputError(
+                f"the point clouds of pair '{pair.name}' have no intensity field "
+                "(choose one with the intensity channel option)"
+            )
+
+
+def _to_uint8(image: np.ndarray) -> np.ndarray:
+    if image.dtype == np.uint8:
+        return image
+    from nbcalib.io.image import to_float_grey
+
+    return np.round(to_float_grey(image) * 255.0).astype(np.uint8)
+
+
+def _accumulate(pair: PairInput, mode: str, config: PreprocessConfig, progress):
+    from nbcalib.odometry import integrate_dynamic
+    from nbcalib.preprocess.accumulate import integrate_static
+
+    if mode == "static":
+        return integrate_static(
+            pair.scans,
+            voxel_size=config.voxel_size,
+            min_distance=config.min_distance,
+            progress=progress,
+        )
+    return integrate_dynamic(
+        pair.scans,
+        config=config.odometry,
+        voxel_size=config.voxel_size,
+        min_distance=config.min_distance,
+        frame_rate=config.frame_rate,
+        progress=progress,
+    )
+
+
+def prepare_pair(
+    pair: PairInput,
+    config: PreprocessConfig | None = None,
+    *,
+    log: Callable[[str], None] | None = None,
+) -> PairData:
+    """One pair's dense cloud, equalised intensities and camera image (module docstring).
+
+    Parameters
+    ----------
+    pair : PairInput
+        Scans and image (:meth:`nbcalib.preprocess.inputs.InputSpec.gather`, or arrays).
+    config : PreprocessConfig, optional
+    log : callable, optional
+        Receives progress lines.
+
+    Returns
+    -------
+    PairData
+        Without a LiDAR image yet (:func:`render_pairs`).
+
+    Raises
+    ------
+    InputError
+        No point left after accumulation.
+    """
+    from nbcalib.preprocess.intensity import equalize_image, equalize_point_intensities
+
+    config = config or PreprocessConfig()
+    log = log or (lambda line: None)
+    mode = choose_mode(pair, config)
+    t0 = time.perf_counter()
+    log(f"{pair.name}: {len(pair.scans)} scan(s), {mode} integration")
+    cloud = _accumulate(pair, mode, config, progress=len(pair.scans) > 3)
+    if len(cloud) == 0:
+        raise InputError(
+            f"pair '{pair.name}': no point left after accumulation "
+            f"(all within {config.min_distance} m of the sensor?)"
+        )
+    intensities = cloud.intensity
+    if config.equalize:
+        intensities = equalize_point_intensities(intensities)
+        image = equalize_image(pair.image)
+    else:
+        top = float(np.max(intensities)) if intensities.size else 1.0
+        intensities = np.clip(intensities / (top if top > 0 else 1.0), 0.0, 1.0)
+        image = _to_uint8(pair.image)
+    # the work directory's PLY holds float32: keep exactly those values
+    points = cloud.points.astype(np.float32).astype(np.float64)
+    intensities = np.asarray(intensities, dtype=np.float32).astype(np.float64)
+    summary = {"mode": mode, "scans": len(pair.scans), "points": len(points)}
+    log(f"{pair.name}: {len(points)} points, {time.perf_counter() - t0:.1f} s")
+    return PairData(pair.name, image, points, intensities, summary=summary)
+
+
+def render_pairs(
+    pairs: Sequence[PairData],
+    virtual: VirtualCamera | None = None,
+    *,
+    log: Callable[[str], None] | None = None,
+) -> tuple[VirtualCamera, list[PairData]]:
+    """Render every pair's LiDAR image and index map with one virtual camera.
+
+    Parameters
+    ----------
+    pairs : sequence of PairData
+        Dense clouds (:func:`prepare_pair`).
+    virtual : VirtualCamera, optional
+        The camera to render with; default: chosen from the first pair's LiDAR field of view
+        (as the reference: one virtual camera for all pairs).
+    log : callable, optional
+        Receives progress lines.
+
+    Returns
+    -------
+    virtual : VirtualCamera
+    pairs : list of PairData
+        The same pairs with ``lidar_image`` set.
+    """
+    from nbcalib.preprocess.lidar_image import (
+        estimate_lidar_fov,
+        make_virtual_camera,
+        render_lidar_image,
+    )
+
+    log = log or (lambda line: None)
+    if not pairs:
+        raise ValueError("render_pairs needs at least one pair")
+    if virtual is None:
+        fov = estimate_lidar_fov(pairs[0].points_lidar)
+        camera, T_vcam_lidar = make_virtual_camera(fov)
+        virtual = VirtualCamera(camera, T_vcam_lidar, math.degrees(fov))
+        log(f"LiDAR field of view {virtual.fov_deg:.1f} deg: {camera.model} virtual camera")
+    rendered = []
+    for pair in pairs:
+        image = render_lidar_image(
+            virtual.camera, virtual.T_vcam_lidar, pair.points_lidar, pair.intensities
+        )
+        filled = int(np.count_nonzero(image.index >= 0))
+        summary = {**(pair.summary or {}), "lidar_image_filled_pixels": filled}
+        rendered.append(replace(pair, lidar_image=image, summary=summary))
+    return virtual, rendered
