@@ -37,6 +37,24 @@ _NEWTON_ITERS = 30
 
 
 @jit
+def _bounded_newton_step(x, f, df, x_hi):
+    """One safeguarded Newton step for ``f(x) = 0`` on ``[0, x_hi]``: ``(x_new, stop)``.
+
+    A step that would leave the interval goes half-way to its end instead; ``stop`` when the
+    slope is not positive (``x`` is kept) or the step was negligible.
+    """
+    if df <= 0.0:
+        return x, True
+    step = f / df
+    x_new = x - step
+    if x_new < 0.0:
+        x_new = 0.5 * x
+    if x_new > x_hi:
+        x_new = 0.5 * (x + x_hi)
+    return x_new, abs(step) <= 1e-15 * (1.0 + x_new)
+
+
+@jit
 def _undistort_poly(params, xd, yd):
     """Invert :func:`~nbcalib.kernels.projection._distort_poly` by Newton's method: (x, y, ok).
 
@@ -65,18 +83,8 @@ def _undistort_poly(params, xd, yd):
             dden = k4 + r2 * (2.0 * k5 + 3.0 * k6 * r2)
             rad = num / den
             drad = (dnum * den - num * dden) / (den * den)
-            f = r * rad - rd
-            df = rad + 2.0 * r2 * drad
-            if df <= 0.0:
-                break
-            step = f / df
-            r_new = r - step
-            if r_new < 0.0:
-                r_new = 0.5 * r
-            if r_new > r_hi:
-                r_new = 0.5 * (r + r_hi)
-            r = r_new
-            if abs(step) <= 1e-15 * (1.0 + r):
+            r, stop = _bounded_newton_step(r, r * rad - rd, rad + 2.0 * r2 * drad, r_hi)
+            if stop:
                 break
         x = xd * r / rd
         y = yd * r / rd
@@ -145,16 +153,8 @@ def unproject_pixel(model_id, params, u, v):
             t2 = theta * theta
             f = theta * (1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4)))) - theta_d
             df = 1.0 + t2 * (3.0 * k1 + t2 * (5.0 * k2 + t2 * (7.0 * k3 + t2 * 9.0 * k4)))
-            if df <= 0.0:
-                break
-            step = f / df
-            t_new = theta - step
-            if t_new < 0.0:
-                t_new = 0.5 * theta
-            if t_new > theta_max:
-                t_new = 0.5 * (theta + theta_max)
-            theta = t_new
-            if abs(step) <= 1e-15 * (1.0 + theta):
+            theta, stop = _bounded_newton_step(theta, f, df, theta_max)
+            if stop:
                 break
         t2 = theta * theta
         resid = theta * (1.0 + t2 * (k1 + t2 * (k2 + t2 * (k3 + t2 * k4)))) - theta_d
