@@ -28,39 +28,33 @@ Example
 
 from __future__ import annotations
 
-import importlib
+from nbcalib._lazy import lazy_exports
 
-_EXPORTS = {
-    "InitialGuessConfig": "config",
-    "MIN_CORRESPONDENCES": "estimate",
-    "InitialGuess": "estimate",
-    "estimate_initial_guess": "estimate",
-    "translation_from_bearings": "estimate",
-    "translation_ransac": "estimate",
-    "LMResult": "lm",
-    "cauchy_loss": "lm",
-    "refine_pose_lm": "lm",
-    "reprojection_errors": "lm",
-    "reprojection_residuals": "lm",
-    "ManualCorrespondence": "manual",
-    "read_manual_correspondences": "manual",
-    "resolve_manual_correspondences": "manual",
-    "write_manual_correspondences": "manual",
-    "RotationRansacResult": "ransac",
-    "estimate_rotation_ransac": "ransac",
-    "usable_correspondences": "ransac",
-    "SyntheticCorrespondences": "synthetic",
-    "synthetic_correspondences": "synthetic",
-}
-
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        return getattr(importlib.import_module(f"nbcalib.initial_guess.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module 'nbcalib.initial_guess' has no attribute {name!r}")
-
-
-def __dir__():
-    return __all__
+__getattr__, __dir__, __all__ = lazy_exports(
+    "nbcalib.initial_guess",
+    {
+        "config": ("InitialGuessConfig",),
+        "estimate": (
+            "MIN_CORRESPONDENCES",
+            "InitialGuess",
+            "estimate_initial_guess",
+            "translation_from_bearings",
+            "translation_ransac",
+        ),
+        "lm": (
+            "LMResult",
+            "cauchy_loss",
+            "refine_pose_lm",
+            "reprojection_errors",
+            "reprojection_residuals",
+        ),
+        "manual": (
+            "ManualCorrespondence",
+            "read_manual_correspondences",
+            "resolve_manual_correspondences",
+            "write_manual_correspondences",
+        ),
+        "ransac": ("RotationRansacResult", "estimate_rotation_ransac", "usable_correspondences"),
+        "synthetic": ("SyntheticCorrespondences", "synthetic_correspondences"),
+    },
+)

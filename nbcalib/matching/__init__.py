@@ -29,58 +29,48 @@ Example
 
 from __future__ import annotations
 
-import importlib
+from nbcalib._lazy import lazy_exports
 
-_EXPORTS = {
-    "MatchConfig": "config",
-    "PairMatches": "find",
-    "find_correspondences": "find",
-    "reference_matches": "find",
-    "Correspondences": "correspondences",
-    "correspondences_from_matches": "correspondences",
-    "lift_lidar_pixels": "correspondences",
-    "lift_matches": "correspondences",
-    "pool_correspondences": "correspondences",
-    "MultiViewMatches": "multiview",
-    "ViewMatches": "multiview",
-    "match_views": "multiview",
-    "match_images": "match",
-    "available_matchers": "match",
-    "camera_scale_for": "match",
-    "pixels_per_radian": "match",
-    "resolve_matcher": "match",
-    "rotate_image": "match",
-    "unrotate_points": "match",
-    "MATCHERS": "match",
-    "Matches": "matches",
-    "read_matches_json": "matches",
-    "write_matches_json": "matches",
-    "draw_matches": "draw",
-    "LEARNED_MATCHERS": "onnx_matcher",
-    "LEARNED_MATCHER_NAMES": "config",
-    "OnnxMatcher": "onnx_matcher",
-    "default_model_dir": "onnx_matcher",
-    "model_dir": "onnx_matcher",
-    "exported_matchers": "onnx_matcher",
-    "NORMALIZATIONS": "normalize",
-    "normalize_image": "normalize",
-    "fill_holes": "normalize",
-    "LidarView": "views",
-    "heading_rotations": "views",
-    "prior_rotations": "views",
-    "render_view": "views",
-    "scaled_camera": "views",
-    "view_scale": "views",
-}
-
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        return getattr(importlib.import_module(f"nbcalib.matching.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module 'nbcalib.matching' has no attribute {name!r}")
-
-
-def __dir__():
-    return __all__
+__getattr__, __dir__, __all__ = lazy_exports(
+    "nbcalib.matching",
+    {
+        "config": ("MatchConfig", "LEARNED_MATCHER_NAMES"),
+        "find": ("PairMatches", "find_correspondences", "reference_matches"),
+        "correspondences": (
+            "Correspondences",
+            "correspondences_from_matches",
+            "lift_lidar_pixels",
+            "lift_matches",
+            "pool_correspondences",
+        ),
+        "multiview": ("MultiViewMatches", "ViewMatches", "match_views"),
+        "match": (
+            "match_images",
+            "available_matchers",
+            "camera_scale_for",
+            "pixels_per_radian",
+            "resolve_matcher",
+            "rotate_image",
+            "unrotate_points",
+            "MATCHERS",
+        ),
+        "matches": ("Matches", "read_matches_json", "write_matches_json"),
+        "draw": ("draw_matches",),
+        "onnx_matcher": (
+            "LEARNED_MATCHERS",
+            "OnnxMatcher",
+            "default_model_dir",
+            "model_dir",
+            "exported_matchers",
+        ),
+        "normalize": ("NORMALIZATIONS", "normalize_image", "fill_holes"),
+        "views": (
+            "LidarView",
+            "heading_rotations",
+            "prior_rotations",
+            "render_view",
+            "scaled_camera",
+            "view_scale",
+        ),
+    },
+)

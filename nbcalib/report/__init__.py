@@ -10,28 +10,13 @@ Importing this package is cheap: the modules (and numba) load on first use.
 
 from __future__ import annotations
 
-import importlib
+from nbcalib._lazy import lazy_exports
 
-_EXPORTS = {
-    "AXIS_NAMES": "quality",
-    "AssessConfig": "config",
-    "Quality": "quality",
-    "assess": "quality",
-    "interval_quantiles": "quality",
-    "rejudge": "quality",
-    "Report": "html",
-    "make_report": "html",
-    "write_report": "html",
-}
-
-__all__ = sorted(_EXPORTS)
-
-
-def __getattr__(name: str):
-    if name in _EXPORTS:
-        return getattr(importlib.import_module(f"nbcalib.report.{_EXPORTS[name]}"), name)
-    raise AttributeError(f"module 'nbcalib.report' has no attribute {name!r}")
-
-
-def __dir__():
-    return __all__
+__getattr__, __dir__, __all__ = lazy_exports(
+    "nbcalib.report",
+    {
+        "quality": ("AXIS_NAMES", "Quality", "assess", "interval_quantiles", "rejudge"),
+        "config": ("AssessConfig",),
+        "html": ("Report", "make_report", "write_report"),
+    },
+)
