@@ -215,7 +215,7 @@ def add_options(group, options) -> None:
     for option in options:
         default = option.default()
         help_text = option.help
-        if option.takes_value and default not in (None, False, ""):
+        if option.takes_value and default is not None and default != "":
             help_text = f"{help_text} (default: {default})"
         kwargs: dict[str, Any] = {"default": argparse.SUPPRESS, "help": help_text}
         if option.takes_value:

@@ -18,14 +18,14 @@ EPILOG = """\
 examples:
   nbcalib calibrate work/
   nbcalib calibrate work/ --init 0.1,-0.05,0.02,0.5,-0.5,0.5,0.5
-  nbcalib calibrate work/ --init=-0.1,0.05,0.02,0.5,-0.5,0.5,0.5
+  nbcalib calibrate work/ --init -0.1,0.05,0.02,0.5,-0.5,0.5,0.5
   nbcalib calibrate work/ --optimizer nelder_mead          # the paper's optimiser alone
   nbcalib calibrate work/ --optimizer lbfgs                # L-BFGS alone, over the pyramid
   nbcalib calibrate work/ --pairs 1 --window 1              # first pair only, 3x3 visibility test
   nbcalib calibrate work/ --pyramid-levels 0                # full resolution only (reference)
 
 --init takes T_lidar_camera as x,y,z,qx,qy,qz,qw (metres, quaternion xyzw), the calib.json layout;
-write --init=-0.1,... when the first value is negative.
+the settings not given are the job's (recorded in WORKDIR), else the defaults.
 """
 
 

@@ -95,9 +95,12 @@ def add_parser(subparsers, formatter_class) -> argparse.ArgumentParser:
         help="camera image size (default 1280x960; equirectangular 1280x640)",
     )
     colour = p.add_mutually_exclusive_group()
-    colour.add_argument("--color", dest="color", action="store_true", help="RGB images")
-    colour.add_argument("--gray", dest="color", action="store_false", help="grey images")
-    p.set_defaults(color=True)
+    colour.add_argument(
+        "--color", dest="color", action="store_true", default=None, help="RGB images (default)"
+    )
+    colour.add_argument(
+        "--gray", dest="color", action="store_false", default=None, help="grey images"
+    )
     p.add_argument(
         "--modality-gap",
         type=float,
@@ -183,7 +186,7 @@ def run(args) -> int:
         duration=args.duration,
         motion=args.motion,
         image_size=args.image_size,
-        color=args.color,
+        color=args.color is not False,
         modality_gap=args.modality_gap,
         parallel=args.parallel,
     )
