@@ -49,10 +49,10 @@ from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
 import numpy as np
-from nbcalib.preprocess.pipeline import PreprocessConfig
 
 from nbcalib.metrics import pose_errors
 from nbcalib.odometry import voxel_deduplicate
+from nbcalib.preprocess.config import PreprocessConfig
 from nbcalib.preprocess.intensity import equalize_image, equalize_point_intensities
 from nbcalib.registration.refine import RefineConfig, RegistrationPair, refine
 from nbcalib.report.quality import AXIS_NAMES, AssessConfig, assess, rejudge
