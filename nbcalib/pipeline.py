@@ -395,7 +395,7 @@ class Calibrator:
     def _assess(self) -> None:
         from nbcalib.report.quality import assess
 
-        T, start = self._result_pose(), self._start_pose()
+        T, start = self._result_pose(), self._start_pose(required=False)
         pairs = self._registration_pairs()
         converged = None if self.refinement is None else self.refinement.converged
         if converged is None and self.work is not None:

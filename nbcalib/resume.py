@@ -68,9 +68,17 @@ def _present(calibrator, calib, stage: str) -> bool:
 
 def _done(calibrator, calib, stage: str) -> tuple[bool, str]:
     """(keep the product, why) for one stage."""
+    managed = calibrator.work is None or (
+        calib is not None and isinstance(calib.nbcalib.get("made"), dict)
+    )
+    if not managed and calib is not None:
+        # made without nbcalib: keep what is there; a later product stands for its inputs
+        # (a guess picked by hand needs no matches, a result implies its guess)
+        later = STAGES[STAGES.index(stage) :]
+        if any(_present(calibrator, calib, s) for s in later if s != "report"):
+            return True, "done, made without nbcalib"
     if not _present(calibrator, calib, stage):
         return False, ""
-    managed = calibrator.work is None or isinstance(calib.nbcalib.get("made"), dict)
     if not managed:
         return True, "done, made without nbcalib"
     made = calibrator._made if calibrator.work is None else calib.nbcalib["made"]

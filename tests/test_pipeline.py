@@ -109,3 +109,36 @@ def test_the_api_finds_its_own_initial_guess():
     assert guess["rotation_error_deg"] < 1.0 and guess["translation_error_m"] < 0.1, guess
     final = pose_errors(result.T_camera_lidar, truth)
     assert final["rotation_error_deg"] < 0.5 and final["translation_error_m"] < 0.05, final
+
+
+def test_a_work_directory_of_the_reference_toolbox_is_read_as_it_means(demo, tmp_path, capsys):
+    """No nbcalib records: products are kept, matches.json is lifted, the report still runs."""
+    import shutil
+
+    work = tmp_path / "work"
+    shutil.copytree(demo / "work", work)
+    for path in [*work.glob("*_correspondences.json"), *work.glob("*_matches.png")]:
+        path.unlink()
+    shutil.rmtree(work / "report")
+    (work / "nbcalib_config.yaml").unlink()
+    calib = json.loads((work / "calib.json").read_text())
+    reference = {key: calib[key] for key in ("camera", "meta", "results")}
+    # a start picked by hand (the reference's GUI), and the result calibrate made from it
+    reference["results"] = {
+        "init_T_lidar_camera": calib["nbcalib"]["calibration"]["start_T_lidar_camera"],
+        "T_lidar_camera": calib["results"]["T_lidar_camera"],
+    }
+    (work / "calib.json").write_text(json.dumps(reference, indent=2, sort_keys=True))
+
+    # resuming keeps what the directory holds and says it was not made by nbcalib
+    assert main(["run", str(work), "--no-report"]) == 0
+    err = capsys.readouterr().err
+    assert "preprocess: skipped (done, made without nbcalib)" in err
+    assert "calibrate: skipped (done, made without nbcalib)" in err
+    # the report needs no start pose
+    assert main(["-q", "report", str(work)]) == 0
+    assert (work / "report" / "index.html").is_file()
+    # the initial guess reads the reference's matches.json through the index map
+    assert main(["-q", "initial-guess", str(work), "--force"]) == 0
+    out = capsys.readouterr().out
+    assert "matches" in out and "init_T_lidar_camera_auto" in out
