@@ -91,12 +91,14 @@ for k, (te, re) in enumerate(zip(trans_err, rot_err)):
 
 # %%
 truth_points, _ = seq.dense_cloud()
+thickness = {}  # median local thickness of each cloud, metres
 for label, points in (
     ("naive (no motion model)", naive.points),
     ("continuous-time ICP", dense.points),
     ("true trajectory", truth_points),
 ):
-    print(f"{label:26s} median local thickness {1e3 * local_thickness(points, k=50):.1f} mm")
+    thickness[label] = local_thickness(points, k=50)
+    print(f"{label:26s} median local thickness {1e3 * thickness[label]:.1f} mm")
 
 # %% [markdown]
 # ## Look at a slice
@@ -127,3 +129,12 @@ fig.tight_layout()
 # time: nbcalib synthesises it from each point's azimuth and `--frame-rate`.
 #
 # Next: [04_lidar_image](04_lidar_image.py), rendering the dense cloud as an image.
+
+# %% [markdown]
+# ## What we checked
+#
+# The test suite runs this notebook (`tests/test_notebooks.py`) and checks what it showed:
+#
+# - the continuous-time ICP trajectory stays within 3 cm and 0.6 degrees of the truth;
+# - the deskewed cloud is within 10 % of the thickness of the truly deskewed one, and the naive
+#   cloud at least 25 % thicker.

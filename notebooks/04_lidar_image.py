@@ -60,9 +60,10 @@ for lidar in ("spinning64", "livox"):
 # of 1920 x 960 pixels; the Livox a pinhole camera of 1024 x 1024 looking along its x axis.
 
 # %%
-virtual = {}
+virtual, fov_deg = {}, {}
 for lidar, (points, _) in clouds.items():
     fov = estimate_lidar_fov(points)
+    fov_deg[lidar] = np.degrees(fov)
     camera, T_vcam_lidar = make_virtual_camera(fov)
     virtual[lidar] = (camera, T_vcam_lidar)
     size = f"{camera.width}x{camera.height}"
@@ -76,12 +77,11 @@ for lidar, (points, _) in clouds.items():
 
 # %%
 fig, axes = plt.subplots(2, 2, figsize=(16, 9), gridspec_kw={"width_ratios": [2, 1]})
-renders = {}
+renders, equalised = {}, {}
 for row, (lidar, (points, intensities)) in enumerate(clouds.items()):
     camera, T_vcam_lidar = virtual[lidar]
-    image = render_lidar_image(
-        camera, T_vcam_lidar, points, equalize_point_intensities(intensities)
-    )
+    equalised[lidar] = equalize_point_intensities(intensities)
+    image = render_lidar_image(camera, T_vcam_lidar, points, equalised[lidar])
     renders[lidar] = image
     axes[row, 0].imshow(image.intensity, cmap="gray")
     axes[row, 0].set_title(f"{lidar}: LiDAR intensity ({image.filled.mean():.0%} of pixels filled)")
@@ -129,3 +129,16 @@ fig.tight_layout()
 # into a 4-channel PNG), as the reference toolbox does.
 #
 # Next: [05_initial_guess](05_initial_guess.py), matching the two images.
+
+# %% [markdown]
+# ## What we checked
+#
+# The test suite runs this notebook (`tests/test_notebooks.py`) and checks what it showed:
+#
+# - the field of view is about 180 degrees all around, and between the axes of the Livox's
+#   elliptic field of view; the 150-degree rule picks the virtual camera;
+# - the index map and the range image equal the slow z-buffer reference
+#   (`nbcalib.reference.zbuffer`) to the bit; every filled pixel shows a point of its own, with
+#   its equalised intensity;
+# - the equalised intensities are uniform, the chosen point projects back onto its pixel, and the
+#   equalised camera image spans 0-255.

@@ -59,7 +59,8 @@ c = synthetic_correspondences(camera, truth, 0, n_inliers=100, outlier_fraction=
 guess = estimate_initial_guess(camera, c.uv_camera, c.points_lidar, seed=0)
 n_in = int(guess.inliers.sum())
 print(f"{len(c.uv_camera)} correspondences -> {n_in} inliers, RMS {guess.rms_px:.2f} px")
-print("error:", pose_errors(guess.T_camera_lidar, truth), "success flag:", guess.success)
+known_error = pose_errors(guess.T_camera_lidar, truth)
+print("error:", known_error, "success flag:", guess.success)
 
 # %% [markdown]
 # The reprojection errors under the estimate separate inliers from outliers:
@@ -94,11 +95,15 @@ t, n = translation_ransac(
     street_camera.unproject(s.uv_camera),
     t_start=pulled[:3, 3],
 )
-print("pulled start:", pose_errors(pulled, street_truth))
-print(f"translation RANSAC: {n} inliers,", pose_errors(make_T(pulled[:3, :3], t), street_truth))
+pulled_error = pose_errors(pulled, street_truth)
+ransac_error = pose_errors(make_T(pulled[:3, :3], t), street_truth)
+print("pulled start:", pulled_error)
+print(f"translation RANSAC: {n} inliers,", ransac_error)
+polish_error = {}
 for polish in (False, True):
     g = estimate_initial_guess(street_camera, s.uv_camera, s.points_lidar, polish=polish)
-    print(f"estimate, polish={polish}:", pose_errors(g.T_camera_lidar, street_truth))
+    polish_error[polish] = pose_errors(g.T_camera_lidar, street_truth)
+    print(f"estimate, polish={polish}:", polish_error[polish])
 
 # %% [markdown]
 # From these synthetic outliers (random pairings) both estimates end within a centimetre: Eq. 1
@@ -149,10 +154,12 @@ for k, view in enumerate(found.views):
 
 # %%
 corr = found.correspondences
+chain_guess = chain_error = None
 if len(corr.uv_camera) >= 3:
-    guess = estimate_initial_guess(seq.camera, corr.uv_camera, corr.points_lidar, seed=0)
-    print("success flag:", guess.success, f"({guess.inliers.sum()} inliers)")
-    print("error:", pose_errors(guess.T_camera_lidar, seq.T_camera_lidar))
+    chain_guess = estimate_initial_guess(seq.camera, corr.uv_camera, corr.points_lidar, seed=0)
+    chain_error = pose_errors(chain_guess.T_camera_lidar, seq.T_camera_lidar)
+    print("success flag:", chain_guess.success, f"({chain_guess.inliers.sum()} inliers)")
+    print("error:", chain_error)
 else:
     print("too few correspondences: use a learned matcher or manual picks")
 
@@ -177,3 +184,15 @@ if found.best >= 0:
 # drawn side by side in `WORK/<name>_matches.png`.
 #
 # Next: [06_fine_registration](06_fine_registration.py).
+
+# %% [markdown]
+# ## What we checked
+#
+# The test suite runs this notebook (`tests/test_notebooks.py`) and checks what it showed:
+#
+# - with known correspondences the threshold separates the 100 inliers from the 400 outliers
+#   exactly, and the guess is within millimetres of the truth;
+# - from 1.3 m off, the translation RANSAC comes back within a few centimetres, and both
+#   estimates end within a centimetre;
+# - the best view is the one with the most RANSAC support, and a guess flagged as a success is
+#   within 2 degrees and 10 cm of the truth.

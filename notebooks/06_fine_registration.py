@@ -33,8 +33,9 @@ import numpy as np
 
 from nbcalib.metrics import pose_errors
 from nbcalib.preprocess.intensity import equalize_image, equalize_point_intensities
+from nbcalib.registration.config import RefineConfig
 from nbcalib.registration.nid import NIDCost, quantise
-from nbcalib.registration.refine import RefineConfig, RegistrationPair, refine, visible_subset
+from nbcalib.registration.refine import RegistrationPair, refine, visible_subset
 from nbcalib.synthetic import RigConfig, generate_sequence
 from nbcalib.transforms import se3_exp
 
@@ -88,12 +89,14 @@ def joint_histogram(T):
     return np.histogram2d(lidar_bins, image_bins, bins=16, range=[[0, 16], [0, 16]])[0]
 
 
+nid = {}  # NID of each pose shown
 fig, axes = plt.subplots(1, 2, figsize=(11, 5))
 for ax, (label, T) in zip(axes, (("true pose", T_true), ("rotated by 2 degrees", T_off))):
+    nid[label] = cost.value(T)
     ax.imshow(np.log1p(joint_histogram(T)), origin="lower", cmap="magma")
     ax.set_xlabel("image bin")
     ax.set_ylabel("LiDAR bin")
-    ax.set_title(f"{label}: NID = {cost.value(T):.4f}")
+    ax.set_title(f"{label}: NID = {nid[label]:.4f}")
 fig.tight_layout()
 
 # %% [markdown]
@@ -107,13 +110,14 @@ fig.tight_layout()
 steps = np.linspace(-1, 1, 11 if QUICK else 41)
 labels = ["x [m]", "y [m]", "z [m]", "roll [deg]", "pitch [deg]", "yaw [deg]"]
 scales = [0.1, 0.1, 0.1, np.radians(2), np.radians(2), np.radians(2)]
+axis_nid = np.zeros((6, len(steps)))  # NID along each axis, at the offsets `steps * scales`
 fig, axes = plt.subplots(1, 6, figsize=(18, 3), sharey=True)
 for axis, ax in enumerate(axes):
-    values = []
-    for s in steps:
+    values = axis_nid[axis]
+    for k, s in enumerate(steps):
         delta = np.zeros(6)
         delta[axis] = s * scales[axis]
-        values.append(cost.value(se3_exp(delta) @ T_true))
+        values[k] = cost.value(se3_exp(delta) @ T_true)
     x = steps * (0.1 if axis < 3 else 2.0)
     ax.plot(x, values)
     ax.axvline(0, color="k", lw=0.5)
@@ -137,7 +141,8 @@ direction = rng.normal(size=6)
 direction[:3] *= 0.07 / np.linalg.norm(direction[:3])
 direction[3:] *= np.radians(1.5) / np.linalg.norm(direction[3:])
 T_init = se3_exp(direction) @ T_true
-print("start:", pose_errors(T_init, T_true))
+start_error = pose_errors(T_init, T_true)
+print("start:", start_error)
 
 
 def show(outer, step):
@@ -149,7 +154,8 @@ def show(outer, step):
 
 
 result = refine([pair], T_init, RefineConfig(max_outer=3 if QUICK else 10), progress=show)
-print("result:", pose_errors(result.T_camera_lidar, T_true))
+result_error = pose_errors(result.T_camera_lidar, T_true)
+print("result:", result_error)
 
 # %% [markdown]
 # ## Several pairs
@@ -161,3 +167,15 @@ print("result:", pose_errors(result.T_camera_lidar, T_true))
 # calibrate` uses every pair in it.
 #
 # Next: [07_quality_report](07_quality_report.py), how to tell whether to trust a result.
+
+# %% [markdown]
+# ## What we checked
+#
+# The test suite runs this notebook (`tests/test_notebooks.py`) and checks what it showed:
+#
+# - hidden-point removal drops points that are in the image;
+# - at the truth the joint histogram is sharper (lower joint entropy) and the NID lower than
+#   2 degrees off, and along every axis the NID is a valley with its minimum within one step of
+#   zero;
+# - `refine` lowers the NID, converges, and ends closer to the truth than it started (within
+#   0.9 degrees).
