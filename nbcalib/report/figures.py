@@ -147,28 +147,12 @@ def lidar_edge_points(
     return np.unique(index[edges & filled]).astype(np.int64)
 
 
-def edge_overlay(
-    camera: CameraModel,
-    image: np.ndarray,
-    points_lidar: np.ndarray,
-    edge_points: np.ndarray,
-    poses: list[tuple[str, np.ndarray, np.ndarray]],
-) -> bytes:
+def edge_overlay(camera: CameraModel, image, points_lidar, edge_points, poses) -> bytes:
     """Image edges (grey) against projected LiDAR edge points (orange), one panel per pose.
 
-    Parameters
-    ----------
-    camera : CameraModel
-    image : ndarray of shape (H, W), uint8
-    points_lidar : ndarray of shape (N, 3), float64
-    edge_points : ndarray of shape (M,), int64
-        From :func:`lidar_edge_points`.
-    poses : list of (title, T_camera_lidar, visible indices)
-
-    Returns
-    -------
-    bytes
-        PNG.
+    ``camera``, ``image``, ``points_lidar`` and ``poses`` are as for :func:`overlays`;
+    ``edge_points`` (ndarray of shape (M,), int64) are rows of ``points_lidar`` from
+    :func:`lidar_edge_points`. Returns the PNG's bytes.
     """
     import cv2
 
