@@ -120,24 +120,29 @@ def parse_pose(text: str, option: str):
     return Start.from_values(values, option)
 
 
-def stage_calibrator(args: argparse.Namespace):
+def stage_calibrator(args: argparse.Namespace, own: tuple[str, ...]):
     """The :class:`~nbcalib.pipeline.Calibrator` of a stage command on a preprocessed WORKDIR.
 
-    Its config is the one the work directory recorded, with the options given now over it, so a
-    stage run by hand uses the job's settings (and ``nbcalib run`` can keep what it made).
+    The stage's own settings (config sections ``own``, and ``seed`` when named) start from
+    their defaults, with the options given now over them, as when the stage is run by hand;
+    the other sections are the ones the work directory recorded, so that what earlier stages
+    made is described by the settings that made it.
     """
+    from dataclasses import replace
+
     from nbcalib.commands._options import build_config
-    from nbcalib.config import config_from_record
+    from nbcalib.config import CalibrationConfig, config_from_record
     from nbcalib.pipeline import Calibrator
     from nbcalib.workdir import WorkDir
 
     work = WorkDir(args.workdir)
     calib = work.require_preprocessed()
+    defaults = CalibrationConfig()
+    base = replace(
+        config_from_record(calib.nbcalib.get("config")),
+        **{name: getattr(defaults, name) for name in own},
+    )
     model_dir = getattr(args, "model_dir", None) or (calib.nbcalib.get("run") or {}).get(
         "model_dir"
     )
-    return Calibrator(
-        build_config(args, base=config_from_record(calib.nbcalib.get("config"))),
-        workdir=work,
-        model_dir=model_dir,
-    )
+    return Calibrator(build_config(args, base=base), workdir=work, model_dir=model_dir)

@@ -25,7 +25,7 @@ examples:
   nbcalib calibrate work/ --pyramid-levels 0                # full resolution only (reference)
 
 --init takes T_lidar_camera as x,y,z,qx,qy,qz,qw (metres, quaternion xyzw), the calib.json layout;
-the settings not given are the job's (recorded in WORKDIR), else the defaults.
+settings not given take their defaults.
 """
 
 
@@ -53,7 +53,7 @@ def run(args) -> int:
     from nbcalib.commands._args import parse_pose, stage_calibrator
     from nbcalib.transforms import invert_T, pose_error
 
-    calibrator = stage_calibrator(args)
+    calibrator = stage_calibrator(args, ("refine",))
     init = parse_pose(args.init, "--init") if args.init else None
     t0 = time.perf_counter()
     calibrator.run(init=init, only="calibrate")

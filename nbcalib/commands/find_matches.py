@@ -81,7 +81,7 @@ def run(args: argparse.Namespace) -> int:
     from nbcalib.io.calib_json import MANUAL_STAGE
     from nbcalib.products import Start
 
-    calibrator = stage_calibrator(args)
+    calibrator = stage_calibrator(args, ("matching",))
     calib = calibrator.work.read_calib()
     prior = None
     if getattr(args, "prior", None) is not None:

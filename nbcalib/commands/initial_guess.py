@@ -80,7 +80,7 @@ def run(args: argparse.Namespace) -> int:
 
     from nbcalib.commands._args import stage_calibrator
 
-    calibrator = stage_calibrator(args)
+    calibrator = stage_calibrator(args, ("initial_guess", "seed"))
     manual = getattr(args, "manual", None)
     calibrator.run(manual=manual, only="initial-guess", accept_failed_guess=args.force)
     guess, corr = calibrator.guess, calibrator._guess_corr

@@ -48,7 +48,7 @@ def run(args) -> int:
     """Write the report and print the verdict."""
     from nbcalib.commands._args import stage_calibrator
 
-    calibrator = stage_calibrator(args)
+    calibrator = stage_calibrator(args, ("assess",))
     calibrator.run(only="report")
     report = calibrator.report
     u = report.uncertainty

@@ -80,8 +80,9 @@ class Report:
 def make_report(workdir: str | os.PathLike, *, assess_config: AssessConfig | None = None) -> Report:
     """Judge the calibration of a work directory and write its HTML report (``nbcalib report``).
 
-    The assessment stage of :class:`nbcalib.pipeline.Calibrator`, with the settings the work
-    directory recorded (``assess_config`` replaces their ``assess`` section).
+    The assessment stage of :class:`nbcalib.pipeline.Calibrator`, as ``nbcalib report`` runs
+    it: the settings the work directory recorded, with ``assess_config`` (default:
+    ``AssessConfig()``) as the assessment's own.
 
     Parameters
     ----------
@@ -111,8 +112,7 @@ def make_report(workdir: str | os.PathLike, *, assess_config: AssessConfig | Non
     if work.path.is_dir() and not work.calib_path.is_file():
         raise InputError("no calib.json here: run nbcalib preprocess first", work.path)
     config = config_from_record(work.require_preprocessed().nbcalib.get("config"))
-    if assess_config is not None:
-        config = replace(config, assess=assess_config)
+    config = replace(config, assess=assess_config or AssessConfig())
     calibrator = Calibrator(config, workdir=work)
     calibrator.run(only="report")
     return calibrator.report
