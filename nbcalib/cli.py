@@ -143,6 +143,13 @@ def main(argv: list[str] | None = None) -> int:
     except BrokenPipeError:  # `nbcalib ... | head`: the reader left; not an error of ours
         sys.stderr.close()
         return 0
+    except (PermissionError, NotADirectoryError, IsADirectoryError, FileExistsError) as exc:
+        # the file system refused (a read-only folder, a file where a folder should be): the
+        # user's to fix, so one line naming the path, not a traceback
+        where = f"{exc.filename}: " if exc.filename else ""
+        reason = (exc.strerror or type(exc).__name__).lower()
+        print(f"nbcalib {args.command}: error: {where}{reason}", file=sys.stderr)
+        return 2
     except Exception:
         traceback.print_exc()
         print(f"nbcalib {args.command}: internal error (a bug: please report it)", file=sys.stderr)

@@ -79,3 +79,11 @@ def test_building_the_parser_loads_no_heavy_module():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.strip() == ""
+
+
+def test_a_file_where_a_folder_should_be_is_a_user_error(tmp_path, capsys):
+    (tmp_path / "file").write_text("x")
+    assert main(["synth", str(tmp_path / "file" / "out"), "--pairs", "1"]) == 2
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and len(err.strip().splitlines()) == 1
+    assert "file" in err and "not a directory" in err
