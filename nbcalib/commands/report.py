@@ -51,6 +51,12 @@ def run(args) -> int:
     calibrator = stage_calibrator(args, ("assess",))
     calibrator.run(only="report")
     report = calibrator.report
+    print_verdict(report)
+    return SUSPECT_STATUS if args.strict and report.verdict == "suspect" else 0
+
+
+def print_verdict(report) -> None:
+    """The verdict, its reasons, the uncertainty and where the report is (``nbcalib run`` too)."""
     u = report.uncertainty
     print(
         f"verdict: {report.verdict}"
@@ -59,4 +65,3 @@ def run(args) -> int:
         f"{u['translation_total_cm']:.2f} cm, rotation <= {u['rotation_total_deg']:.3f} deg"
         f"\nreport: {report.html_path}"
     )
-    return SUSPECT_STATUS if args.strict and report.verdict == "suspect" else 0

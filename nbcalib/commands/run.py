@@ -204,6 +204,10 @@ def _summary(calibrator) -> None:
     calib = calibrator.work.read_calib() if calibrator.work.is_complete() else None
     if calib is None or not calib.has_result(FINAL_STAGE):
         return
+    if calibrator.report is not None:
+        from nbcalib.commands.report import print_verdict
+
+        print_verdict(calibrator.report)
     values = ", ".join(f"{v:.6f}" for v in calib.results[FINAL_STAGE])
     ran = ", ".join(calibrator.ran) or "nothing (every stage was done)"
     print(f"T_lidar_camera = [{values}]  (x y z qx qy qz qw)")
