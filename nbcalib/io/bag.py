@@ -44,6 +44,7 @@ from nbcalib.io.bag_messages import (
     header_stamp_ns,
     livox_fields_from_msg,
     parse_livox_raw,
+    raw_header_stamp_ns,
     typestore,
 )
 from nbcalib.io.pointcloud import PointCloud, pointcloud_from_fields
@@ -180,6 +181,21 @@ class Bag:
             stamp = header_stamp_ns(header) if header is not None else 0
             yield (stamp or log_time), msg
 
+    def stamps(self, topic: str) -> list[int]:
+        """The header stamp of every message of a topic, in time order, nanoseconds.
+
+        Read from the serialised header (no message is decoded); the bag's receive time where
+        the stamp is 0, as :meth:`messages`, :meth:`pointclouds` and :meth:`images` yield it.
+        Message ``k`` here is message ``k`` of those iterators (their ``only`` argument).
+        """
+        stamps = []
+        for log_time, msgtype, raw in self.raw_messages(topic):
+            stamp = raw_header_stamp_ns(bytes(raw[:12]), cdr=self._reader.is2)
+            if stamp is None:  # an exotic encoding: the slow, sure way
+                stamp = header_stamp_ns(self._deserialize(raw, msgtype, topic).header)
+            stamps.append(stamp or log_time)
+        return stamps
+
     def _deserialize(self, raw: bytes, msgtype: str, topic: str):
         try:
             return self._reader.deserialize(raw, msgtype)
@@ -195,6 +211,7 @@ class Bag:
         *,
         intensity_channel: str | None = "auto",
         time_field: str | None = "auto",
+        only=None,
     ) -> Iterator[tuple[int, PointCloud]]:
         """Yield ``(stamp_ns, PointCloud)`` for every message of a point cloud topic.
 
@@ -208,6 +225,8 @@ class Bag:
         time_field : str or None
             ``"auto"`` picks the first of ``t``, ``time``, ``time_stamp``, ``timestamp``
             (``offset_time`` for Livox); a name; or None.
+        only : collection of int, optional
+            Decode only these messages (0-based, in time order; :meth:`stamps`), skip the rest.
 
         Yields
         ------
@@ -221,7 +240,13 @@ class Bag:
 
         topic = self.select_topic("point cloud", topic)
         source = f"{self.path} {topic}"
-        for log_time, msgtype, raw in self.raw_messages(topic):
+        last = None if only is None else max(only, default=-1)
+        for k, (log_time, msgtype, raw) in enumerate(self.raw_messages(topic)):
+            if only is not None:
+                if k > last:
+                    return
+                if k not in only:
+                    continue
             if msgtype in LIVOX_CUSTOM:
                 stamp, fields = self._livox_fields(raw, msgtype, topic)
                 times = "offset_time" if time_field == "auto" else time_field
@@ -244,7 +269,7 @@ class Bag:
         return livox_fields_from_msg(msg)
 
     def images(
-        self, topic: str | None = None, *, grey: bool = True
+        self, topic: str | None = None, *, grey: bool = True, only=None
     ) -> Iterator[tuple[int, np.ndarray]]:
         """Yield ``(stamp_ns, image)`` for every message of an Image or CompressedImage topic.
 
@@ -254,6 +279,8 @@ class Bag:
             None picks the only image topic.
         grey : bool
             Convert colour to grey with OpenCV's weights (as ``cv_bridge`` to ``mono8``).
+        only : collection of int, optional
+            Decode only these messages (0-based, in time order; :meth:`stamps`), skip the rest.
 
         Yields
         ------
@@ -264,7 +291,15 @@ class Bag:
         """
         topic = self.select_topic("image", topic)
         source = f"{self.path} {topic}"
-        for stamp, msg in self.messages(topic):
+        last = None if only is None else max(only, default=-1)
+        for k, (log_time, msgtype, raw) in enumerate(self.raw_messages(topic)):
+            if only is not None:
+                if k > last:
+                    return
+                if k not in only:
+                    continue
+            msg = self._deserialize(raw, msgtype, topic)
+            stamp = header_stamp_ns(msg.header) or log_time
             if self.topics[topic] == COMPRESSED_IMAGE:
                 yield stamp, decode_compressed_image(msg, grey=grey, source=source)
             else:

@@ -106,6 +106,27 @@ def header_stamp_ns(header) -> int:
     return int(header.stamp.sec) * 1_000_000_000 + int(header.stamp.nanosec)
 
 
+def raw_header_stamp_ns(raw: bytes, *, cdr: bool) -> int | None:
+    """The header stamp of a serialised message that starts with a ``std_msgs/Header``.
+
+    Read straight from the bytes (no deserialisation), in integer nanoseconds: ROS 1 puts
+    ``uint32 seq, uint32 secs, uint32 nsecs`` first; CDR (ROS 2) a 4-byte encapsulation header,
+    then ``int32 sec, uint32 nanosec`` in its byte order. Returns None for bytes too short or an
+    encapsulation this reader does not know (the caller then deserialises).
+    """
+    if cdr:
+        if len(raw) < 12 or raw[0] != 0 or raw[1] not in (0, 1):
+            return None
+        order = "<" if raw[1] == 1 else ">"
+        sec = int(np.frombuffer(raw[4:8], dtype=f"{order}i4")[0])
+        nanosec = int(np.frombuffer(raw[8:12], dtype=f"{order}u4")[0])
+    else:
+        if len(raw) < 12:
+            return None
+        _, sec, nanosec = (int(v) for v in np.frombuffer(raw[:12], dtype="<u4"))
+    return sec * 1_000_000_000 + nanosec
+
+
 # ----------------------------------------------------------------------------------------------
 # Decoding
 
