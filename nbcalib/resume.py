@@ -37,6 +37,30 @@ def changed_settings(recorded, wanted, prefix: str = "") -> list[str]:
     return [] if recorded == wanted else [prefix.rstrip(".") or "record"]
 
 
+def _lookup(record, name: str):
+    """(found, value) of a dotted name in a nested record."""
+    value = record
+    for key in name.split("."):
+        if not isinstance(value, dict) or key not in value:
+            return False, None
+        value = value[key]
+    return True, value
+
+
+def _added_at_default(name: str, recorded, wanted) -> bool:
+    """A setting newer than the record, wanted at its default: the record's job used it too.
+
+    A setting is added with the default that keeps what the code did before, so a record
+    written before it existed was made as that default makes it.
+    """
+    from nbcalib.config import CalibrationConfig, config_to_dict
+
+    if _lookup(recorded, name)[0]:
+        return False
+    found, default = _lookup(config_to_dict(CalibrationConfig()), name)
+    return found and _lookup(wanted, name) == (True, default)
+
+
 def _report_is_current(work, calib) -> bool:
     quality = calib.nbcalib.get("quality")
     return (
@@ -85,7 +109,12 @@ def _done(calibrator, calib, stage: str) -> tuple[bool, str]:
     recorded = made.get(stage)
     if recorded is None:
         return False, "made by an earlier stage's old settings"
-    changed = changed_settings(recorded, calibrator.recipe(stage))
+    wanted = calibrator.recipe(stage)
+    changed = [
+        name
+        for name in changed_settings(recorded, wanted)
+        if not _added_at_default(name, recorded, wanted)
+    ]
     if changed:
         shown = ", ".join(changed[:4]) + (", ..." if len(changed) > 4 else "")
         return False, f"settings changed: {shown}"
