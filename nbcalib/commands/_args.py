@@ -24,7 +24,7 @@ __all__ = [
 
 def add_input_arguments(parser: argparse.ArgumentParser) -> None:
     """Positional ``INPUT... WORKDIR``, ``--points FILE... --image FILE`` and the camera."""
-    from nbcalib.commands._options import INPUT_OPTIONS, add_options
+    from nbcalib.commands._options import INPUT_OPTIONS, RECORDING_OPTIONS, add_options
 
     parser.add_argument(
         "inputs",
@@ -37,6 +37,24 @@ def add_input_arguments(parser: argparse.ArgumentParser) -> None:
     )
     parser.add_argument("--image", metavar="FILE", help="camera image for --points")
     add_options(parser.add_argument_group("camera (default: the bag's CameraInfo)"), INPUT_OPTIONS)
+    group = parser.add_argument_group("several pairs from one recording (one pair per image)")
+    for option in RECORDING_OPTIONS:
+        kwargs = {"metavar": option.metavar, "help": option.help}
+        if option.flag == "--images":
+            kwargs["nargs"] = "+"
+        elif option.flag in ("--every", "--pair-count"):
+            kwargs["type"] = _whole
+        group.add_argument(option.flag, **kwargs)
+
+
+def _whole(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected a whole number, got {text!r}") from None
+    if value < 1:
+        raise argparse.ArgumentTypeError(f"expected a whole number >= 1, got {text!r}")
+    return value
 
 
 def add_verbosity_arguments(group) -> None:
@@ -64,47 +82,75 @@ def stage_parser(module, formatter_class=argparse.HelpFormatter) -> argparse.Arg
     return module.add_parser(scratch.add_subparsers(), formatter_class=formatter_class)
 
 
-def split_workdir(inputs, points) -> tuple[list[str], list[str], str]:
-    """``INPUT... WORKDIR`` -> (inputs, points, workdir).
+def split_workdir(inputs, points, images=None):
+    """``INPUT... WORKDIR`` -> (inputs, points, workdir); with ``images``, images before WORKDIR.
 
-    ``--points a.pcd b.pcd WORKDIR`` with no positional left: the last ``--points`` entry is
-    WORKDIR (argparse cannot tell).
+    ``--points a.pcd b.pcd WORKDIR`` (or ``scans/*.bin --images a.png b.png WORKDIR``): a last
+    list entry that is not a file of its list's kind is WORKDIR (argparse cannot tell); then
+    every positional argument is an input. ``--points`` does so only with no positional left, as
+    before.
 
     Raises
     ------
     InputError
         No WORKDIR, or a WORKDIR that names a data file.
     """
-    from nbcalib.preprocess.inputs import CLOUD_SUFFIXES
+    from nbcalib.preprocess.inputs import CLOUD_SUFFIXES, IMAGE_SUFFIXES
 
     inputs, points = [str(p) for p in inputs or []], [str(p) for p in points or []]
-    if not inputs and len(points) > 1 and Path(points[-1]).suffix.lower() not in CLOUD_SUFFIXES:
-        inputs = [points.pop()]
-    if not inputs:
-        raise InputError("WORKDIR missing: give the work directory as the last argument")
-    workdir = inputs.pop()
-    if Path(workdir).suffix.lower() in (*CLOUD_SUFFIXES, ".png", ".jpg", ".bag"):
+    image_list = [str(p) for p in images or []]
+    workdir = None
+    if len(image_list) > 1 and Path(image_list[-1]).suffix.lower() not in IMAGE_SUFFIXES:
+        workdir = image_list.pop()
+    elif not inputs and len(points) > 1 and Path(points[-1]).suffix.lower() not in CLOUD_SUFFIXES:
+        workdir = points.pop()
+    if workdir is None:
+        if not inputs:
+            raise InputError("WORKDIR missing: give the work directory as the last argument")
+        workdir = inputs.pop()
+    if Path(workdir).suffix.lower() in (*CLOUD_SUFFIXES, *IMAGE_SUFFIXES, ".bag"):
         raise InputError(f"the last argument must be WORKDIR, a folder, not the file {workdir}")
-    return inputs, points, workdir
+    if images is None:
+        return inputs, points, workdir
+    return inputs, points, image_list, workdir
 
 
-def input_spec(args: argparse.Namespace, inputs, points, *, recorded: dict | None = None):
+#: Options of the input spec that are not lists of inputs (laid over a recorded spec)
+_SPEC_OPTIONS = (
+    "image",
+    "camera",
+    "camera_model",
+    "intrinsics",
+    "distortion",
+    "image_times",
+    "scan_times",
+    "every",
+    "pair_count",
+)
+
+
+def input_spec(
+    args: argparse.Namespace, inputs, points, *, images=None, recorded: dict | None = None
+):
     """The :class:`~nbcalib.preprocess.inputs.InputSpec` of a command line.
 
-    With no input given, the inputs a work directory recorded (``recorded``) are used, with the
-    camera options given now laid over them.
+    With no input given (no ``INPUT``, ``--points``, ``--images`` or ``--frames``), the inputs a
+    work directory recorded (``recorded``) are used, with the options given now (camera, image
+    selection) laid over them.
     """
     from nbcalib.preprocess.inputs import InputSpec
 
+    images = list(getattr(args, "images", None) or []) if images is None else list(images)
+    frames = getattr(args, "frames", None)
     given = {
-        key: getattr(args, key)
-        for key in ("image", "camera", "camera_model", "intrinsics", "distortion")
-        if getattr(args, key, None) is not None
+        key: getattr(args, key) for key in _SPEC_OPTIONS if getattr(args, key, None) is not None
     }
-    if not inputs and not points and recorded:
+    if not inputs and not points and not images and frames is None and recorded:
         base = InputSpec.from_dict(recorded).to_dict()
         return InputSpec.from_dict({**base, **given})
-    return InputSpec(inputs=tuple(inputs), points=tuple(points), **given)
+    return InputSpec(
+        inputs=tuple(inputs), points=tuple(points), images=tuple(images), frames=frames, **given
+    )
 
 
 def parse_pose(text: str, option: str):

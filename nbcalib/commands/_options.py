@@ -25,6 +25,7 @@ __all__ = [
     "INPUT_OPTIONS",
     "MATCHING",
     "PREPROCESS",
+    "RECORDING_OPTIONS",
     "REFINE",
     "Option",
     "add_options",
@@ -112,6 +113,23 @@ INPUT_OPTIONS = (
     Option("--distortion", "", "distortion coefficients", "A,B,..."),
 )  # fmt: skip
 
+#: Several pairs from one recording (``preprocess`` and ``run``): not settings, recorded as the
+#: job's inputs (:mod:`nbcalib.preprocess.recording`).
+RECORDING_OPTIONS = (
+    Option("--frames", "", "folder of frames, one pair each: subfolders of one point cloud + one "
+           "image, or the KITTI raw layout (velodyne_points/data, image_02/data)", "DIR"),
+    Option("--images", "", "several images for the point clouds, one pair each (image i with "
+           "scan i, or placed by --image-times)", "FILE"),
+    Option("--image-times", "", "times of --images (seconds, on the scans' clock), or a bag's "
+           "header stamps to make pairs at: a,b,... or a file, one time per line", "T"),
+    Option("--scan-times", "", "times at which the point clouds of --images begin (default: "
+           "k / --frame-rate)", "T"),
+    Option("--every", "", "a pair at every Nth image of the recording (frames, --images, bags)",
+           "N"),
+    Option("--pair-count", "", "N pairs, their images spread evenly over the recording (per bag)",
+           "N"),
+)  # fmt: skip
+
 PREPROCESS = (
     Option("--dynamic", "preprocess.mode", "moving spinning LiDAR (CT-ICP)", value="dynamic"),
     Option("--static", "preprocess.mode", "LiDAR at rest (accumulate)", value="static"),
@@ -125,6 +143,11 @@ PREPROCESS = (
     Option("--frame-rate", "preprocess.frame_rate", "scans per second of files without times",
            "HZ"),
     Option("--max-scans", "preprocess.max_scans", "use at most N scans per pair", "N"),
+    Option("--neighbors", "preprocess.neighbors",
+           "scans per pair made per image: the K around its image, its own included", "K"),
+    Option("--image-scan-fraction", "preprocess.image_scan_fraction",
+           "time of an image without a time as a fraction of its own scan's sweep (0.5: KITTI, "
+           "a camera triggered when the LiDAR faces forward)", "F"),
     Option("--no-equalize", "preprocess.equalize", "keep raw intensities and image", value=False),
 )  # fmt: skip
 
@@ -271,7 +294,7 @@ def file_settings(data: dict, path) -> tuple[dict, dict]:
     from nbcalib.commands import run as run_command
 
     stage_tables = ("run", "preprocess", "find-matches", "initial-guess", "calibrate", "report")
-    others = {o.flag: o for o in (*INPUT_OPTIONS, *run_command.RUN_OPTIONS)}
+    others = {o.flag: o for o in (*INPUT_OPTIONS, *RECORDING_OPTIONS, *run_command.RUN_OPTIONS)}
     settings: dict[str, Any] = {}
     other: dict[str, Any] = {}
     entries = []

@@ -52,11 +52,12 @@ def run(args) -> int:
     from nbcalib.commands._options import build_config
     from nbcalib.pipeline import Calibrator
 
-    inputs, points, workdir = split_workdir(args.inputs, args.points)
-    spec = input_spec(args, inputs, points)
+    inputs, points, images, workdir = split_workdir(args.inputs, args.points, args.images or [])
+    spec = input_spec(args, inputs, points, images=images)
     if spec.empty:
         raise InputError(
-            "nothing to preprocess: give INPUT... WORKDIR (or --points FILE --image FILE)"
+            "nothing to preprocess: give INPUT... WORKDIR (or --points FILE --image FILE, or "
+            "--frames DIR)"
         )
     calibrator = Calibrator(build_config(args), workdir=workdir)
     calibrator.run(spec, only="preprocess")

@@ -90,6 +90,21 @@ RUN_OPTIONS = (
            "DIR"),
 )  # fmt: skip
 
+#: Inputs a config file may give by option name (``frames = "kitti/"``), as on the command line.
+FILE_INPUT_KEYS = (
+    "camera",
+    "camera_model",
+    "intrinsics",
+    "distortion",
+    "image",
+    "frames",
+    "images",
+    "image_times",
+    "scan_times",
+    "every",
+    "pair_count",
+)
+
 #: Run options a resumed job (``nbcalib run WORKDIR``) keeps from its record.
 REMEMBERED = ("init", "manual", "prior", "no_matching", "no_report", "model_dir")
 
@@ -145,28 +160,30 @@ def run(args: argparse.Namespace) -> int:
     from nbcalib.workdir import WorkDir
 
     file_values, file_other, file_path = _file(args)
-    inputs, points, workdir = split_workdir(
+    for key in FILE_INPUT_KEYS:  # the config file's inputs, unless given on the command line
+        if key in file_other and getattr(args, key, None) is None:
+            setattr(args, key, file_other[key])
+    inputs, points, images, workdir = split_workdir(
         getattr(args, "inputs", None) or file_other.get("inputs") or [],
         getattr(args, "points", None),
+        getattr(args, "images", None) or [],
     )
     if isinstance(file_other.get("inputs"), dict) and not inputs:  # a written config's inputs
         inputs = []
     work = WorkDir(workdir)
     calib = work.read_calib() if work.is_complete() else None
-    resuming = calib is not None and not inputs and not points
+    given_inputs = inputs or points or images or getattr(args, "frames", None) is not None
+    resuming = calib is not None and not given_inputs
     recorded_run = dict(calib.nbcalib.get("run") or {}) if resuming else {}
     options = {k: v for k, v in file_other.items() if k != "inputs"}
     options.update({k: v for k, v in vars(args).items() if k in _run_dests()})
     for key in REMEMBERED:
         if key not in options and key in recorded_run:
             options[key] = recorded_run[key]
-    for key in ("camera", "camera_model", "intrinsics", "distortion", "image"):
-        if key in file_other and getattr(args, key, None) is None:
-            setattr(args, key, file_other[key])
     recorded_inputs = calib.nbcalib.get("inputs") if resuming else None
     if isinstance(file_other.get("inputs"), dict):
         recorded_inputs = file_other["inputs"]
-    spec = input_spec(args, inputs, points, recorded=recorded_inputs)
+    spec = input_spec(args, inputs, points, images=images, recorded=recorded_inputs)
     base = config_from_record(calib.nbcalib.get("config")) if resuming else CalibrationConfig()
     config = build_config(args, base=base, file_values=file_values, file_path=file_path)
 

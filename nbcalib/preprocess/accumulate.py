@@ -66,6 +66,20 @@ class DenseCloud:
     def __len__(self) -> int:
         return int(self.points.shape[0])
 
+    def pose_at(self, scan: int, fraction: float) -> np.ndarray:
+        """``T_first_at``: the LiDAR pose at ``fraction`` of scan ``scan``'s sweep, in ``first``.
+
+        The trajectory interpolated between the scan's begin and end pose (slerp + lerp,
+        :func:`nbcalib.transforms.interpolate_pose`); ``fraction`` 0 is the scan's first point,
+        1 its last. ``invert_T(pose_at(k, s)) @ p`` moves the cloud into the LiDAR frame at that
+        time (the frame of a camera image taken then).
+        """
+        from nbcalib.transforms import interpolate_pose
+
+        if not 0 <= scan < self.T_first_scanbegin.shape[0]:
+            raise ValueError(f"scan {scan} out of range: {self.T_first_scanbegin.shape[0]} scans")
+        return interpolate_pose(self.T_first_scanbegin[scan], self.T_first_scanend[scan], fraction)
+
 
 def integrate_static(
     scans: Iterable,

@@ -49,6 +49,20 @@ class PreprocessConfig:
         Bag topics; None picks the only topic of each kind.
     max_scans : int or None
         Use at most this many scans per pair.
+    neighbors : int
+        Scans per pair for pairs made per image (``--frames``, ``--images``, a bag's
+        ``--every`` / ``--pair-count`` / ``--image-times``; :mod:`nbcalib.preprocess.recording`):
+        the K scans around the image, its own scan among them. 1: the image's own scan alone
+        (not deskewed: motion needs neighbours); the paper's single-shot protocol takes about
+        10, accumulated as ``mode`` says. A recording with fewer scans gives each pair all of
+        them (with a warning). A pair of all its scans (a bag without image selection, plain
+        files with one image) refuses any other value than 1.
+    image_scan_fraction : float
+        When an image without a time was taken, as a fraction of its own scan's sweep (0 = the
+        scan's first point, 1 = its last), for pairs made per image from frames or from
+        ``--images`` without ``--image-times``; the dense cloud is expressed in the LiDAR frame at
+        that time. 0.5: KITTI, and every camera triggered when a spinning LiDAR whose sweeps
+        start behind it faces forward.
     odometry : DynamicIntegrationConfig
         The continuous-time ICP of dynamic integration (:mod:`nbcalib.odometry.config`).
     """
@@ -63,6 +77,8 @@ class PreprocessConfig:
     image_topic: str | None = None
     camera_info_topic: str | None = None
     max_scans: int | None = None
+    neighbors: int = 1
+    image_scan_fraction: float = 0.5
     odometry: DynamicIntegrationConfig = field(default_factory=DynamicIntegrationConfig)
 
     def __post_init__(self):
@@ -76,5 +92,11 @@ class PreprocessConfig:
             raise ValueError(f"frame_rate must be > 0, got {self.frame_rate}")
         if self.max_scans is not None and self.max_scans < 1:
             raise ValueError(f"max_scans must be >= 1, got {self.max_scans}")
+        if self.neighbors < 1:
+            raise ValueError(f"neighbors must be >= 1, got {self.neighbors}")
+        if not (0.0 <= self.image_scan_fraction <= 1.0):
+            raise ValueError(
+                f"image_scan_fraction must be in [0, 1], got {self.image_scan_fraction}"
+            )
         if not self.intensity_channel:
             raise ValueError("intensity_channel must be 'auto' or a field name")

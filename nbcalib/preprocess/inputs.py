@@ -8,6 +8,12 @@ inputs in two forms, and so does nbcalib, without ROS:
 - **plain files**: point clouds (``.pcd``, ``.ply``, KITTI ``.bin``, ``.npy``/``.npz``) in time
   order and one image (:func:`gather_files`).
 
+Both make one pair of all their scans, the image taken at the start of the first scan (the
+reference's collection procedure: the rig at rest at first). Several pairs from one recording,
+one per image with the scans around it and the cloud at the image's time, come from a folder of
+frames (``frames``), scans with several images (``images``), or bags with an image selection
+(``every``, ``pair_count``, ``image_times``): :mod:`nbcalib.preprocess.recording`.
+
 :class:`InputSpec` is the user's description of the inputs (paths and camera options, as typed
 on the command line); :meth:`InputSpec.gather` reads them into :class:`PairInput` objects and
 resolves the camera. The spec is recorded in the work directory, so that ``nbcalib run WORKDIR``
@@ -64,6 +70,16 @@ class PairInput:
         The camera info of a bag.
     topics : dict of str to str
         The bag topics used (``points_topic``, ``image_topic``, ``camera_info_topic``).
+    image_scan : int or None
+        The scan (index into ``scans``) taken while the image was taken, for pairs made per
+        image (:mod:`nbcalib.preprocess.recording`): the dense cloud is expressed in the LiDAR
+        frame at the image's time. None: at the start of the first scan (a pair of all its
+        scans).
+    image_fraction : float
+        The image's time as a fraction of that scan's sweep (0 = its first point, 1 = its last).
+    info : dict
+        Where the pair sits in its recording (``first_scan``, ``image_scan``, ...), for the
+        work directory's summary.
     """
 
     name: str
@@ -72,6 +88,9 @@ class PairInput:
     image_source: str
     camera: CameraModel | None = None
     topics: dict[str, str] = field(default_factory=dict)
+    image_scan: int | None = None
+    image_fraction: float = 0.0
+    info: dict = field(default_factory=dict)
 
 
 def classify_inputs(
@@ -100,11 +119,27 @@ def classify_inputs(
     return bags, clouds, images
 
 
-def _bag_name(path: Path) -> str:
-    # the reference keeps the .bag suffix of ROS 1 bags and uses a ROS 2 folder's name
+def bag_name(path: Path) -> str:
+    """A bag's data name: the reference keeps a ROS 1 bag's ``.bag`` suffix, a folder's name."""
+    path = Path(path)
     if path.suffix.lower() == ".bag":
         return path.name
     return path.stem if path.is_file() else path.name
+
+
+def bag_topics(bag, config: PreprocessConfig, path) -> tuple[str, str, str, CameraModel | None]:
+    """(points topic, image topic, camera info topic or ``N/A``, camera or None) of a bag."""
+    points_topic = bag.select_topic("point cloud", config.points_topic)
+    image_topic = bag.select_topic("image", config.image_topic)
+    camera = None
+    try:
+        info_topic = bag.select_topic("camera info", config.camera_info_topic)
+        camera = bag.camera_info(info_topic)
+    except InputError:
+        if config.camera_info_topic is not None:
+            raise
+        info_topic = "N/A"
+    return points_topic, image_topic, info_topic, camera
 
 
 def gather_bag(path, config: PreprocessConfig) -> PairInput:
@@ -113,16 +148,7 @@ def gather_bag(path, config: PreprocessConfig) -> PairInput:
 
     path = Path(path)
     with open_bag(path) as bag:
-        points_topic = bag.select_topic("point cloud", config.points_topic)
-        image_topic = bag.select_topic("image", config.image_topic)
-        camera = None
-        try:
-            info_topic = bag.select_topic("camera info", config.camera_info_topic)
-            camera = bag.camera_info(info_topic)
-        except InputError:
-            if config.camera_info_topic is not None:
-                raise
-            info_topic = "N/A"
+        points_topic, image_topic, info_topic, camera = bag_topics(bag, config, path)
         image = None
         for _, img in bag.images(image_topic, grey=True):
             image = img
@@ -141,7 +167,7 @@ def gather_bag(path, config: PreprocessConfig) -> PairInput:
         "image_topic": image_topic,
         "camera_info_topic": info_topic,
     }
-    return PairInput(_bag_name(path), scans, image, f"{path} {image_topic}", camera, topics)
+    return PairInput(bag_name(path), scans, image, f"{path} {image_topic}", camera, topics)
 
 
 def gather_files(
@@ -174,6 +200,20 @@ def _numbers(text: str | None, option: str) -> list[float]:
         raise InputError(f"{option} must be comma-separated numbers, got {text!r}") from None
 
 
+#: InputSpec fields of the per-image forms, recorded only when given (to_dict)
+_RECORDING_FIELDS = ("frames", "images", "image_times", "scan_times", "every", "pair_count")
+
+
+def _check_all_scans(config: PreprocessConfig, what: str) -> None:
+    """A pair of all its scans has no neighbours to choose: refuse ``neighbors`` other than 1."""
+    if config.neighbors != 1:
+        raise InputError(
+            f"neighbors={config.neighbors}: {what} makes one pair of all its scans (at most "
+            "--max-scans); scans around an image are for pairs per image (--frames, --images, "
+            "or a bag's --every/--pair-count/--image-times)"
+        )
+
+
 @dataclass(frozen=True)
 class InputSpec:
     """The inputs of a job as the user gives them (command line: ``INPUT...``, ``--points``...).
@@ -190,6 +230,21 @@ class InputSpec:
         A camera file: ROS camera_info YAML, nbcalib/OpenCV camera YAML/JSON, or a calib.json.
     camera_model, intrinsics, distortion : str or None
         The camera by its parameters (``plumb_bob``, ``fx,fy,cx,cy``, ``k1,k2,...``).
+    frames : str or None
+        A folder of frames, one pair each (``--frames``, :func:`~nbcalib.preprocess.recording.
+        gather_frames`).
+    images : tuple of str
+        Several images for the point clouds, one pair each (``--images``).
+    image_times : str or None
+        ``a,b,...`` seconds or a file of times: the times of ``images``, or for bags the header
+        stamps to make pairs at (``--image-times``).
+    scan_times : str or None
+        The times at which the point clouds of ``images`` begin (``--scan-times``; default
+        ``k / frame_rate``).
+    every : int or None
+        Pairs at every Nth image of the recording (``--every``).
+    pair_count : int or None
+        N pairs, their images spread evenly over the recording (``--pair-count``).
     """
 
     inputs: tuple[str, ...] = ()
@@ -199,30 +254,79 @@ class InputSpec:
     camera_model: str | None = None
     intrinsics: str | None = None
     distortion: str | None = None
+    frames: str | None = None
+    images: tuple[str, ...] = ()
+    image_times: str | None = None
+    scan_times: str | None = None
+    every: int | None = None
+    pair_count: int | None = None
 
     def __post_init__(self):
         object.__setattr__(self, "inputs", tuple(str(p) for p in self.inputs))
         object.__setattr__(self, "points", tuple(str(p) for p in self.points))
+        object.__setattr__(self, "images", tuple(str(p) for p in self.images))
+        for name in ("frames", "image_times", "scan_times"):
+            value = getattr(self, name)
+            if value is not None:
+                object.__setattr__(self, name, str(value))
+        for name, flag in (("every", "--every"), ("pair_count", "--pair-count")):
+            value = getattr(self, name)
+            if value is None:
+                continue
+            try:
+                number = int(value)
+            except (TypeError, ValueError):
+                number = None
+            if number is None or number != float(value) or number < 1:
+                raise InputError(f"{flag} must be a whole number >= 1, got {value!r}")
+            object.__setattr__(self, name, number)
+        if self.every is not None and self.pair_count is not None:
+            raise InputError("give --every or --pair-count, not both")
 
     @property
     def empty(self) -> bool:
         """No input at all."""
-        return not (self.inputs or self.points)
+        return not (self.inputs or self.points or self.frames or self.images)
+
+    @property
+    def per_image(self) -> bool:
+        """Pairs are made per image of a recording (:mod:`nbcalib.preprocess.recording`)."""
+        return bool(
+            self.frames
+            or self.images
+            or self.image_times is not None
+            or self.every is not None
+            or self.pair_count is not None
+        )
 
     def to_dict(self) -> dict:
         """JSON-ready form with absolute paths (:meth:`from_dict` reads it back).
 
         Absolute, so that a job continued from another folder finds its inputs, and the same
-        inputs typed from another folder are recognised as the same.
+        inputs typed from another folder are recognised as the same. The recording options
+        (``frames`` ... ``pair_count``) appear only when given, so that a job recorded before
+        they existed is recognised as the same job.
         """
 
         def absolute(path):
             return None if path is None else str(Path(path).absolute())
 
-        data = asdict(self)
+        data = {
+            key: value
+            for key, value in asdict(self).items()
+            if key not in _RECORDING_FIELDS or value not in (None, ())
+        }
         data["inputs"] = [absolute(p) for p in self.inputs]
         data["points"] = [absolute(p) for p in self.points]
         data["image"], data["camera"] = absolute(self.image), absolute(self.camera)
+        if self.frames is not None:
+            data["frames"] = absolute(self.frames)
+        if self.images:
+            data["images"] = [absolute(p) for p in self.images]
+        for key in ("image_times", "scan_times"):  # a file of times, or the numbers themselves
+            value = getattr(self, key)
+            if value is not None and Path(value).is_file():
+                data[key] = absolute(value)
         return data
 
     @classmethod
@@ -238,7 +342,8 @@ class InputSpec:
         ------
         InputError
             Missing, unknown or corrupt inputs, bags mixed with plain files, not exactly one
-            image for plain files, or no camera (the message says which option gives one).
+            image for plain files, recording options that do not fit the inputs, or no camera
+            (the message says which option gives one).
         """
         bags, clouds, images = classify_inputs(self.inputs)
         clouds += [Path(p) for p in self.points]
@@ -246,15 +351,20 @@ class InputSpec:
             images.append(Path(self.image))
         if bags and (clouds or images):
             raise InputError("give either bags or plain files (point clouds + image), not both")
-        if bags:
+        if self.per_image:
+            pairs, data_path = self._gather_per_image(bags, clouds, images, config)
+        elif bags:
+            _check_all_scans(config, "a bag without --every, --pair-count or --image-times")
             pairs = [gather_bag(b, config) for b in sorted(bags, key=lambda p: p.name)]
             data_path = str(Path(bags[0]).resolve().parent)
         else:
             if len(images) != 1:
                 raise InputError(
                     f"plain files need exactly one image (.png/.jpg), got {len(images)}"
+                    + ("; for one pair per image give them with --images" if images else "")
                     + ("" if images else "; add --image FILE")
                 )
+            _check_all_scans(config, "plain files with one image")
             pairs = [gather_files(clouds, images[0], config)]
             data_path = str(Path(clouds[0]).resolve().parent) if clouds else ""
         camera = self.camera_for(pairs[0].image.shape) or pairs[0].camera
@@ -264,6 +374,49 @@ class InputSpec:
                 "--camera-model/--intrinsics/--distortion"
             )
         return pairs, camera, data_path
+
+    def _gather_per_image(self, bags, clouds, images, config) -> tuple[list[PairInput], str]:
+        """Pairs per image of a recording (:mod:`nbcalib.preprocess.recording`)."""
+        from nbcalib.preprocess import recording
+
+        select = {"every": self.every, "pair_count": self.pair_count}
+        if self.frames:
+            if bags or clouds or images or self.images:
+                raise InputError("--frames takes the whole recording: give no other input")
+            if self.image_times is not None or self.scan_times is not None:
+                raise InputError("--image-times/--scan-times do not apply to --frames")
+            pairs = recording.gather_frames(self.frames, config, **select)
+            return pairs, str(Path(self.frames).resolve())
+        if bags:
+            if self.images or self.scan_times is not None:
+                raise InputError("--images/--scan-times are for plain point cloud files, not bags")
+            if self.image_times is not None and (self.every or self.pair_count):
+                raise InputError("give --image-times, --every or --pair-count, not several")
+            pairs = []
+            for bag in sorted(bags, key=lambda p: p.name):
+                pairs += recording.gather_bag_pairs(
+                    bag, config, image_times=self.image_times, **select
+                )
+            return pairs, str(Path(bags[0]).resolve().parent)
+        if not self.images:
+            raise InputError(
+                "--every, --pair-count and --image-times choose among several images: give "
+                "--frames DIR, --images FILE..., or a bag"
+            )
+        if images:
+            raise InputError("give the images of a sequence all with --images (none as INPUT)")
+        for path in self.images:
+            if Path(path).suffix.lower() not in IMAGE_SUFFIXES:
+                raise InputError(f"--images takes images ({', '.join(IMAGE_SUFFIXES)})", path=path)
+        pairs = recording.gather_image_sequence(
+            clouds,
+            self.images,
+            config,
+            image_times=self.image_times,
+            scan_times=self.scan_times,
+            **select,
+        )
+        return pairs, str(Path(clouds[0]).resolve().parent)
 
     def camera_for(self, image_shape) -> CameraModel | None:
         """The camera the spec names (a file or parameters), sized like the image; else None."""

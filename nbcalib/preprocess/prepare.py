@@ -2,7 +2,9 @@
 
 - :func:`prepare_pair`: one pair's scans accumulated into a dense cloud, static (LiDAR at rest,
   non-repetitive scan) or dynamic (continuous-time ICP for a moving spinning LiDAR,
-  :mod:`nbcalib.odometry`); LiDAR intensities rank-equalised and the camera image
+  :mod:`nbcalib.odometry`), in the LiDAR frame at the start of the first scan, or, for a pair
+  made per image (:mod:`nbcalib.preprocess.recording`), at the image's time (the trajectory
+  interpolated within the image's scan); LiDAR intensities rank-equalised and the camera image
   histogram-equalised (both optional). The cloud is kept at float32 precision, as the work
   directory's PLY stores it, so that in-memory and on-disk jobs compute the same numbers.
 - :func:`render_pairs`: one virtual camera chosen from the first pair's field of view (pinhole
@@ -105,6 +107,19 @@ def _accumulate(pair: PairInput, mode: str, config: PreprocessConfig, progress):
     )
 
 
+def _at_image_time(cloud, scan: int, fraction: float) -> tuple[np.ndarray, float]:
+    """The cloud's points in the LiDAR frame at ``fraction`` of scan ``scan``; the frame's offset.
+
+    Returns the points and how far that frame's origin is from the first scan's start, metres.
+    """
+    from nbcalib.transforms import invert_T
+
+    T_first_image = cloud.pose_at(scan, fraction)
+    T_image_first = invert_T(T_first_image)
+    points = cloud.points @ T_image_first[:3, :3].T + T_image_first[:3, 3]
+    return points, float(np.linalg.norm(T_first_image[:3, 3]))
+
+
 def prepare_pair(
     pair: PairInput,
     config: PreprocessConfig | None = None,
@@ -144,6 +159,13 @@ def prepare_pair(
             f"pair '{pair.name}': no point left after accumulation "
             f"(all within {config.min_distance} m of the sensor?)"
         )
+    points, summary = cloud.points, {}
+    if pair.image_scan is not None:
+        summary = dict(pair.info)
+        if mode == "dynamic":
+            points, offset = _at_image_time(cloud, pair.image_scan, pair.image_fraction)
+            summary["image_frame_offset_m"] = offset
+            log(f"{pair.name}: cloud at the image time, {offset:.3f} m from the first scan's start")
     intensities = cloud.intensity
     if config.equalize:
         intensities = equalize_point_intensities(intensities)
@@ -153,9 +175,9 @@ def prepare_pair(
         intensities = np.clip(intensities / (top if top > 0 else 1.0), 0.0, 1.0)
         image = _to_uint8(pair.image)
     # the work directory's PLY holds float32: keep exactly those values
-    points = cloud.points.astype(np.float32).astype(np.float64)
+    points = points.astype(np.float32).astype(np.float64)
     intensities = np.asarray(intensities, dtype=np.float32).astype(np.float64)
-    summary = {"mode": mode, "scans": len(pair.scans), "points": len(points)}
+    summary = {"mode": mode, "scans": len(pair.scans), "points": len(points), **summary}
     log(f"{pair.name}: {len(points)} points, {time.perf_counter() - t0:.1f} s")
     return PairData(pair.name, image, points, intensities, summary=summary)
 
