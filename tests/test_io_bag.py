@@ -88,6 +88,15 @@ def test_bag_round_trip(tmp_path, rng, fmt, name):
 
     images = list(read_images(path, "/image_rgb", grey=False))
     assert [s for s, _ in images] == stamps and np.array_equal(images[0][1], rgb)
+
+    # stamps read from the serialised headers, and only the chosen messages decoded
+    with open_bag(path) as bag:
+        for topic in ("/points", "/image_rgb", "/image/compressed"):
+            assert bag.stamps(topic) == stamps, topic
+        [(stamp, cloud)] = list(bag.pointclouds("/points", only={2}))
+        assert stamp == stamps[2] and np.array_equal(cloud.fields["x"], clouds[2]["x"])
+        assert [s for s, _ in bag.images("/image_mono", only={0, 2})] == [stamps[0], stamps[2]]
+        assert list(bag.pointclouds("/points", only=set())) == []
     assert np.array_equal(next(read_images(path, "/image_rgb"))[1], rgb_to_grey(rgb))
     assert np.array_equal(next(read_images(path, "/image_mono"))[1], mono)
     assert np.array_equal(next(read_images(path, "/image/compressed", grey=False))[1], rgb)
@@ -141,6 +150,8 @@ def test_livox_custom_msg(tmp_path, rng, fmt, name, package):
     assert list_topics(path)["/livox/lidar"] == f"{package}/msg/CustomMsg"
     (stamp, cloud), (_, single) = list(read_pointclouds(path))
     assert stamp == 5_000_000_123 and len(single) == 1
+    with open_bag(path) as bag:
+        assert bag.stamps("/livox/lidar") == [5_000_000_123, 5_100_000_000]
     for key, values in fields.items():
         assert np.array_equal(cloud.fields[key], values), key
     assert np.array_equal(cloud.intensity, fields["reflectivity"].astype(np.float64))
