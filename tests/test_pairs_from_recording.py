@@ -117,6 +117,21 @@ def test_frames_make_one_pair_each_named_after_its_folder(frames, tmp_path, caps
     assert InputSpec.from_dict(inputs).frames == str(frames.absolute())
 
 
+def test_run_takes_the_recording_from_a_config_file_and_resumes_with_it(frames, tmp_path):
+    job = tmp_path / "job.toml"
+    job.write_text(
+        f'frames = "{frames}"\nevery = 2\ncamera-model = "pinhole"\n'
+        'intrinsics = "300,300,159.5,119.5"\n'
+    )
+    work = tmp_path / "work"
+    assert main(["-q", "run", "--config", str(job), str(work), "--until", "preprocess"]) == 0
+    assert WorkDir(work).names() == ["frame_0", "frame_2"]
+    recorded = json.loads((work / "calib.json").read_text())["nbcalib"]["inputs"]
+    assert recorded["every"] == 2 and recorded["frames"] == str(frames.absolute())
+    spec = InputSpec.from_dict(recorded)
+    assert spec.every == 2 and spec.to_dict() == recorded
+
+
 def test_neighbours_make_a_denser_cloud_at_the_image_time(frames, sequence):
     """K = 3: the scans around the image, deskewed, in the LiDAR frame at the image's time."""
     from nbcalib.odometry import integrate_dynamic
@@ -297,7 +312,8 @@ def test_recording_options_need_a_recording(plain_pair, capsys, tmp_path):
     base = ["preprocess", str(cloud), str(image), str(tmp_path / "w"), *CAMERA]
     for extra, message in (
         (["--neighbors", "3"], "neighbors=3: plain files with one image makes one pair"),
-        (["--every", "2"], "choose among several images"),
+        (["--every", "2"], "are for several images"),
+        (["--scan-times", "0"], "are for several images"),
         (["--every", "0"], "expected a whole number >= 1"),
         (["--image-scan-fraction", "1.5"], "image_scan_fraction must be in [0, 1]"),
     ):

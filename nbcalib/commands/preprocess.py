@@ -16,6 +16,12 @@ LiDAR intensity image with its point-index map rendered by a virtual camera. No 
 INPUT: ROS 1 .bag files, ROS 2 bag folders (sqlite3 or mcap), or plain files: point clouds
 (.pcd, .ply, KITTI .bin = float32 x,y,z,intensity, .npy/.npz) in time order and one image
 (.png/.jpg). The last positional argument is WORKDIR.
+
+Several pairs from one recording, one per image: --frames DIR (a folder of frames), --images
+FILE... (several images for the point clouds), or a bag with --every N, --pair-count N or
+--image-times. Each pair accumulates the --neighbors K scans around its image (default 1: its
+own scan) and its cloud is expressed in the LiDAR frame at the image's time (from the stamps, or
+--image-scan-fraction of the image's own sweep when there are none: 0.5 fits KITTI).
 """
 
 EPILOG = """\
@@ -26,6 +32,9 @@ examples:
   nbcalib preprocess --points lidar.pcd --image image.png work/ \\
       --camera-model plumb_bob --intrinsics 1450,1450,960,600 --distortion=-0.04,0.08,0,0,0
   nbcalib preprocess out.bag work/ --points-topic /livox/lidar --image-topic /image
+  nbcalib preprocess --frames kitti_raw/ work/ --camera calib.json --neighbors 10  # pair per frame
+  nbcalib preprocess scans/*.bin --images cam/*.png work/ --camera camera.yaml --every 5
+  nbcalib preprocess drive.bag work/ --pair-count 5 --neighbors 10 --dynamic  # 5 pairs of one bag
 
 --camera FILE accepts a ROS camera_info YAML, an nbcalib/OpenCV camera YAML/JSON, or a calib.json.
 """

@@ -55,6 +55,7 @@ examples:
   nbcalib run run1.bag run2.bag work/ --dynamic --matcher sift
   nbcalib run --points lidar.pcd --image image.png work/ --camera camera.yaml
   nbcalib run scans/*.bin image.png work/ --camera camera.yaml --init -0.1,0,0,0.5,-0.5,0.5,0.5
+  nbcalib run --frames kitti_raw/ work/ --camera calib.json --every 4 --neighbors 10
   nbcalib run work/                                              # continue an interrupted job
   nbcalib run work/ --from calibrate --optimizer nelder_mead     # redo the last stages
   nbcalib run --config job.toml data.bag work/

@@ -295,6 +295,7 @@ class InputSpec:
             self.frames
             or self.images
             or self.image_times is not None
+            or self.scan_times is not None
             or self.every is not None
             or self.pair_count is not None
         )
@@ -400,8 +401,8 @@ class InputSpec:
             return pairs, str(Path(bags[0]).resolve().parent)
         if not self.images:
             raise InputError(
-                "--every, --pair-count and --image-times choose among several images: give "
-                "--frames DIR, --images FILE..., or a bag"
+                "--every, --pair-count, --image-times and --scan-times are for several "
+                "images: give --frames DIR, --images FILE..., or a bag"
             )
         if images:
             raise InputError("give the images of a sequence all with --images (none as INPUT)")
