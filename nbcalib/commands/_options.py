@@ -196,6 +196,8 @@ REFINE = (
     Option("--optimizer", "refine.optimizer",
            "hybrid: Nelder-Mead over the pyramid, then L-BFGS; or either alone"),
     Option("--bins", "refine.bins", "NID histogram bins", "N"),
+    Option("--structure-weight", "refine.structure_weight",
+           "weight of the depth-edge / image-edge NID beside the intensity NID (0: off)", "W"),
     Option("--max-outer", "refine.max_outer", "outer iterations at most", "N"),
     Option("--depth-margin", "refine.depth_margin", "visibility depth margin, metres", "M"),
     Option("--window", "refine.window", "visibility window half-size, pixels", "PX"),

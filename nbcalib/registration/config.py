@@ -72,6 +72,10 @@ class RefineConfig:
         Visible points every class of a pair needs (about 20 per histogram cell at 16 bins);
         otherwise that pair keeps one histogram. Single real scans (KITTI: 4-7 k points a
         class, noisy normals) stay on the plain NID this way.
+    structure_weight : float
+        Weight of the structure term beside each pair's intensity NID: the NID between LiDAR
+        depth edges and image edges (:mod:`nbcalib.registration.structure`; 0: off, the
+        paper and the reference).
     parallel : bool
         Multithreaded NID kernels (same values; slower in CPU time on a loaded machine).
     max_pairs : int or None
@@ -97,6 +101,7 @@ class RefineConfig:
     max_total_rotation_deg: float = 5.0
     orientation_classes: bool = True
     min_class_points: int = 5000
+    structure_weight: float = 0.0
     parallel: bool = True
     max_pairs: int | None = None
 
@@ -111,6 +116,7 @@ class RefineConfig:
             "depth_margin",
             "max_total_translation",
             "max_total_rotation_deg",
+            "structure_weight",
         ):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} must be >= 0")

@@ -84,9 +84,22 @@ class RegistrationPair:
     intensities: np.ndarray
     name: str = ""
     classes: np.ndarray | None = field(default=None, repr=False)
+    _edges: tuple | None = field(default=None, repr=False, compare=False)
     _tree: object = field(default=None, repr=False, compare=False)
     _finite: np.ndarray | None = field(default=None, repr=False, compare=False)
     _cache_key: tuple | None = field(default=None, repr=False, compare=False)
+
+    def structure(self) -> tuple[np.ndarray, np.ndarray]:
+        """(depth-edge score per point, image edge strength): the structure channel, made once.
+
+        :mod:`nbcalib.registration.structure`; both depend on the data only, not on the pose.
+        """
+        from nbcalib.registration.structure import depth_edge_scores, image_edges
+
+        key = (id(self.points_lidar), id(self.image))
+        if self._edges is None or self._edges[0] != key:
+            self._edges = (key, depth_edge_scores(self.points_lidar), image_edges(self.image))
+        return self._edges[1], self._edges[2]
 
     def orientation_classes(self, indices=None) -> np.ndarray:
         """Orientation classes of the points ``indices`` (default all), each computed once.
@@ -216,8 +229,11 @@ def downscale_camera(camera: CameraModel, level: int) -> CameraModel:
     )
 
 
-def downscale_image(image, level: int) -> np.ndarray:
+def downscale_image(image, level: int, *, equalize: bool = True) -> np.ndarray:
     """Grey image averaged over ``2^level`` blocks and histogram-equalised again (uint8).
+
+    ``equalize=False`` keeps the block means (rounded to uint8): for edge images, whose
+    equalisation would lift flat regions' noise (:mod:`nbcalib.registration.structure`).
 
     Parameters
     ----------
@@ -237,6 +253,8 @@ def downscale_image(image, level: int) -> np.ndarray:
     f = 2**level
     h, w = img.shape[0] // f, img.shape[1] // f
     blocks = img[: h * f, : w * f].reshape(h, f, w, f).mean(axis=(1, 3))
+    if not equalize:
+        return np.round(blocks * 255.0).astype(np.uint8)
     return equalize_image(blocks)
 
 
@@ -248,7 +266,9 @@ def build_cost(
     Visibility is tested with the full-resolution camera; the cost uses pyramid ``level``. With
     ``config.orientation_classes`` each pair's visible points are split by surface orientation
     and the pair's term is the point-weighted mean of its class NIDs
-    (:mod:`nbcalib.registration.orientation`); the pairs' terms are summed.
+    (:mod:`nbcalib.registration.orientation`); with ``config.structure_weight > 0`` each pair
+    adds that times the NID between its points' depth-edge scores and the image's edge strength
+    (:mod:`nbcalib.registration.structure`); the pairs' terms are summed.
     """
     # the hybrid ends with L-BFGS: its result is judged by the smooth form
     form = "hard" if config.optimizer == "nelder_mead" else "smooth"
@@ -272,6 +292,20 @@ def build_cost(
                 )
             )
             weights.append(group.size / keep.size if keep.size else 1.0)
+        if config.structure_weight > 0 and keep.size:
+            scores, edges = pair.structure()
+            costs.append(
+                NIDCost(
+                    camera,
+                    downscale_image(edges, level, equalize=False),
+                    pair.points_lidar[keep],
+                    scores[keep],
+                    bins=config.bins,
+                    form=form,
+                    parallel=config.parallel,
+                )
+            )
+            weights.append(config.structure_weight)
     return MultiNIDCost(costs, weights), counts
 
 
