@@ -23,6 +23,7 @@ from nbcalib.registration.refine import (
     downscale_image,
     refine,
 )
+from nbcalib.registration.trust import TrustRegion
 from nbcalib.transforms import invert_T, pose_error, pose_from_xyz_quat, pose_to_xyz_quat, se3_exp
 from nbcalib.workdir import WorkDir, make_calib
 from tests.test_nid import textured_scene
@@ -196,6 +197,9 @@ def test_hybrid_runs_nelder_mead_then_lbfgs_at_full_resolution(rng):
     assert result.converged
     dt, dr = pose_error(invert_T(result.T_camera_lidar), np.eye(4))
     assert dt < 0.005 and dr < 0.05, (dt, dr)
+    # well inside the default trust region (0.5 m / 5 deg): not on its edge
+    assert not result.at_trust_boundary
+    assert abs(result.moved_translation - 0.037) < 0.006 and result.moved_rotation_deg < 1.4
     with pytest.raises(ValueError, match="optimizer"):
         RefineConfig(optimizer="bfgs")
 
@@ -218,20 +222,51 @@ def test_pyramid_levels_keep_a_minimum_image_size():
     )
 
 
-def test_refine_stops_when_it_wanders_from_the_initial_guess(rng):
-    """A flat cost must not carry the pose metres away: stop, unconverged, and say why."""
+@pytest.mark.parametrize("optimizer", ["lbfgs", "nelder_mead", "hybrid"])
+def test_refine_stays_in_the_trust_region_when_the_minimum_lies_outside(rng, optimizer):
+    """The truth is 8 cm from the start, the region 3 cm / 1 deg: the run ends on its edge."""
     cam = example_camera("plumb_bob", 320, 240)
-    image, points, intensities = textured_scene(cam, rng, n=5000, blur=0.8)
-    T_start = se3_exp(np.array([0.3, 0.0, 0.0, 0.0, 0.0, 0.0]))  # 30 cm off
+    image, points, intensities = textured_scene(cam, rng, n=20000, blur=0.8)
+    T_start = se3_exp(np.array([0.08, 0.0, 0.0, 0.0, 0.0, 0.0]))  # 8 cm off
     config = RefineConfig(
-        optimizer="lbfgs",
+        optimizer=optimizer,
         pyramid_levels=0,
         hidden_point_removal=False,
         parallel=False,
-        max_total_translation=0.05,
+        max_outer=4,
+        trust_translation=0.03,
+        trust_rotation_deg=1.0,
     )
-    result = refine([RegistrationPair(cam, image, points, intensities)], T_start, config)
-    assert not result.converged
-    assert "from the initial guess" in result.stopped
-    with pytest.raises(ValueError, match="max_total_translation"):
-        RefineConfig(max_total_translation=-1.0)
+    seen = []
+    pair = RegistrationPair(cam, image, points, intensities)
+    result = refine([pair], T_start, config, progress=lambda i, step: seen.append(i))
+    region = TrustRegion(T_start, 0.03, 1.0)
+    dt, dr = pose_error(invert_T(result.T_camera_lidar), invert_T(T_start))
+    assert dt <= 0.03 * (1 + 1e-9) and dr <= 1.0 * (1 + 1e-9), (dt, dr)
+    assert result.at_trust_boundary and region.on_boundary(result.T_camera_lidar)
+    assert result.moved == pytest.approx((dt, dr))
+    assert result.stopped == "" and result.trust_translation == 0.03 and seen
+    np.testing.assert_array_equal(result.T_init, T_start)
+    # it went towards the truth, as far as the region lets it
+    assert pose_error(invert_T(result.T_camera_lidar), np.eye(4))[0] < 0.08 - 0.025
+
+
+def test_trust_region_settings_are_checked_and_the_old_names_still_read():
+    from nbcalib.config import CalibrationConfig, config_from_record, set_values
+
+    for bad in ({"trust_translation": -1.0}, {"trust_rotation_deg": -1.0}):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            RefineConfig(**bad)
+    with pytest.raises(ValueError, match="trust_rotation_deg"):
+        RefineConfig(trust_rotation_deg=180.0)
+    # config files and records written before the rename
+    config = set_values(CalibrationConfig(), {"refine.max_total_translation": 0.3})
+    assert config.refine.trust_translation == 0.3
+    record = {"refine": {"max_total_translation": 0.2, "max_total_rotation_deg": 3.0}}
+    old = config_from_record(record).refine
+    assert (old.trust_translation, old.trust_rotation_deg) == (0.2, 3.0)
+    with pytest.raises(ValueError, match="former name"):
+        set_values(
+            CalibrationConfig(),
+            {"refine.max_total_translation": 0.3, "refine.trust_translation": 0.4},
+        )
