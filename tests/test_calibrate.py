@@ -66,6 +66,38 @@ def test_calibrate_recovers_the_truth_from_init(workdir, capsys):
     assert "outer 1 (level 0): NID" in err and "level 1" not in err
 
 
+def test_a_result_held_by_the_trust_region_is_flagged_and_judged_suspect(workdir, capsys):
+    """5 cm off, a 2 cm / 0.5 deg region: the result ends on its edge; the report says so."""
+    T_start = se3_exp(np.array([0.04, -0.03, 0.02, 0.012, -0.008, 0.01]))
+    init = ",".join(f"{v:.9f}" for v in pose_to_xyz_quat(invert_T(T_start)))
+    args = ["--trust-translation", "0.02", "--trust-rotation", "0.5"]
+    args += ["--init-uncertainty", "0.005", "0.1"]
+    assert main(["calibrate", str(workdir.path), f"--init={init}", *args]) == 0
+    assert "ON THE TRUST REGION'S EDGE" in capsys.readouterr().out
+    calib = read_calib_json(workdir.calib_path)
+    fig = calib.nbcalib["calibration"]
+    assert fig["trust_region"] == {"translation_m": 0.02, "rotation_deg": 0.5}
+    assert fig["at_trust_boundary"] is True
+    assert fig["start_uncertainty"] == {"translation_m": 0.005, "rotation_deg": 0.1}
+    moved = fig["change_from_start"]
+    assert moved["translation_m"] <= 0.02 + 1e-9 and moved["rotation_deg"] <= 0.5 + 1e-9
+    assert calib.nbcalib["config"]["refine"]["trust_translation"] == 0.02
+
+    # the report, run on its own, reads the region and the start's uncertainty back
+    assert main(["report", str(workdir.path)]) == 0
+    out = capsys.readouterr().out
+    assert "verdict: suspect" in out and "reached the trust region around the start" in out
+    assert "the start's (stated, 0.5 cm, 0.10 deg) and the result's uncertainties allow" in out
+    assert "from the start" in out and "ON ITS EDGE" in out
+    quality = read_calib_json(workdir.calib_path).nbcalib["quality"]
+    move = quality["move_from_start"]
+    assert move["at_trust_boundary"] is True
+    assert move["start_uncertainty"]["source"] == "stated"
+    assert move["allowed_translation_m"] < move["translation_m"]
+    page = (workdir.path / "report" / "index.html").read_text()
+    assert "Move from the start" in page and "ON ITS EDGE" in page
+
+
 def test_calibrate_starts_from_the_initial_guess_in_calib_json(workdir):
     calib = read_calib_json(workdir.calib_path)
     calib.set_T_camera_lidar(
@@ -84,6 +116,9 @@ def test_calibrate_starts_from_the_initial_guess_in_calib_json(workdir):
         (["--init", "a,b,c,d,e,f,g"], "7 numbers"),
         ([], "no initial guess"),
         (["--pairs", "0", "--init", "0,0,0,0,0,0,1"], "--pairs"),
+        (["--init-uncertainty", "0.05", "1"], "--init-uncertainty needs --init"),
+        (["--init", "0,0,0,0,0,0,1", "--init-uncertainty", "x", "1"], "two numbers"),
+        (["--init", "0,0,0,0,0,0,1", "--trust-rotation", "-1"], "trust_rotation_deg"),
     ],
 )
 def test_calibrate_user_errors(workdir, capsys, args, message):
