@@ -435,7 +435,7 @@ class Calibrator:
         )
         calib = self._calib()
         info = calib.nbcalib.get("calibration")
-        if start is not None and isinstance(info, dict):  # the start's uncertainty judged by
+        if start is not None and isinstance(info, dict):  # the uncertainty the report judged by
             info["start_uncertainty"] = _uncertainty_record(start.uncertainty)
         self._remember("report", calib)
 
