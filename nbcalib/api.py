@@ -145,7 +145,7 @@ def _load_camera(camera, image_shape):
 
 def _keyword_settings() -> dict[str, str]:
     """Setting names that are unique across the config's sections -> ``section.field``."""
-    from nbcalib.config import SECTIONS
+    from nbcalib.config import SECTIONS, renamed_settings
 
     seen: dict[str, list[str]] = {}
     for section, cls in SECTIONS.items():
@@ -153,6 +153,8 @@ def _keyword_settings() -> dict[str, str]:
             seen.setdefault(f.name, []).append(f"{section}.{f.name}")
     names = {name: paths[0] for name, paths in seen.items() if len(paths) == 1}
     names["seed"] = "seed"
+    for old, new in renamed_settings().items():  # former names still work
+        names.setdefault(old.partition(".")[2], new)
     return names
 
 

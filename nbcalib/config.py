@@ -54,6 +54,7 @@ __all__ = [
     "config_to_dict",
     "flatten",
     "read_config_file",
+    "renamed_settings",
     "set_values",
     "write_config",
 ]
@@ -99,6 +100,13 @@ SECTIONS: dict[str, type] = {
 }
 
 _TOP_LEVEL = ("seed",)
+
+
+def renamed_settings() -> dict[str, str]:
+    """``section.field`` of settings under a former name -> their ``section.field`` now."""
+    from nbcalib.registration.config import RENAMED as REFINE_RENAMED
+
+    return {f"refine.{old}": f"refine.{new}" for old, new in REFINE_RENAMED.items()}
 
 
 def _kind(annotation: str) -> tuple[str, bool]:
@@ -165,7 +173,8 @@ def set_values(config: CalibrationConfig, values: dict[str, Any]) -> Calibration
     """A copy of ``config`` with ``{"section.field": value, "seed": value}`` changed.
 
     Nested settings are dotted further (``preprocess.odometry.knn``). Values are checked
-    against the field types and each section's own checks.
+    against the field types and each section's own checks. Former names of renamed settings
+    (:func:`renamed_settings`: ``refine.max_total_translation``) set the setting's new name.
 
     Raises
     ------
@@ -174,7 +183,15 @@ def set_values(config: CalibrationConfig, values: dict[str, Any]) -> Calibration
     """
     top: dict[str, Any] = {}
     sections = {name: getattr(config, name) for name in SECTIONS}
+    renamed = renamed_settings()
     for key, value in values.items():
+        if key in renamed:
+            if renamed[key] in values and values[renamed[key]] != value:
+                raise ValueError(
+                    f"{key} (the former name of {renamed[key]}) and {renamed[key]} are both "
+                    "given, with different values"
+                )
+            key = renamed[key]
         section, _, rest = key.partition(".")
         if not rest and section in _TOP_LEVEL:
             top[section] = _coerce(section, "int", value)

@@ -389,13 +389,19 @@ class Calibrator:
                 "stopped": result.stopped,
                 "seconds": round(time.perf_counter() - t0, 3),
                 "change_from_start": {"translation_m": float(dt), "rotation_deg": float(dr)},
+                "trust_region": {
+                    "translation_m": cfg.trust_translation,
+                    "rotation_deg": cfg.trust_rotation_deg,
+                },
+                "at_trust_boundary": result.at_trust_boundary,
+                "start_uncertainty": _uncertainty_record(start.uncertainty),
             }
         self._remember("calibrate", calib)
 
     def _assess(self) -> None:
         from nbcalib.report.quality import assess
 
-        T, start = self._result_pose(), self._start_pose(required=False)
+        T, start = self._result_pose(), self._report_start()
         pairs = self._registration_pairs()
         converged = None if self.refinement is None else self.refinement.converged
         if converged is None and self.work is not None:
@@ -408,6 +414,7 @@ class Calibrator:
             config=self.config.refine,
             converged=converged,
             assess_config=self.config.assess,
+            start_uncertainty=None if start is None else start.uncertainty,
         )
         _detail(f"verdict: {self.quality.verdict}")
         if self.work is None:
@@ -426,7 +433,28 @@ class Calibrator:
             self.config.refine,
             None if start is None else start.source,
         )
-        self._remember("report", self._calib())
+        calib = self._calib()
+        info = calib.nbcalib.get("calibration")
+        if start is not None and isinstance(info, dict):  # the uncertainty the report judged by
+            info["start_uncertainty"] = _uncertainty_record(start.uncertainty)
+        self._remember("report", calib)
+
+    def _report_start(self) -> Start | None:
+        """The start the report judges the move from, with the uncertainty stated for it now.
+
+        The start of the result (:meth:`_start_pose`); when this run was given that same pose
+        (as the start or the fallback), the uncertainty stated with it now replaces the
+        recorded one, so that restating it redoes the report, not fine registration.
+        """
+        from dataclasses import replace
+
+        start = self._start_pose(required=False)
+        if start is None:
+            return None
+        for mine in (self._given, self._fallback):
+            if mine is not None and tuple(mine.values) == tuple(start.values):
+                return replace(start, uncertainty=mine.uncertainty)
+        return start
 
     # ================================================================ products
     def result(self) -> CalibrationResult | None:
@@ -550,7 +578,11 @@ class Calibrator:
             info = calib.nbcalib.get("calibration") or {}
             stored = info.get("start_T_lidar_camera")
             if calib.has_result(FINAL_STAGE) and isinstance(stored, list) and len(stored) == 7:
-                return Start.from_values(stored, str(info.get("start", "start")))
+                return Start.from_values(
+                    stored,
+                    str(info.get("start", "start")),
+                    _uncertainty_from_record(info.get("start_uncertainty")),
+                )
             stage = calib.latest_initial_stage()
             if stage is not None:
                 return Start.from_matrix(calib.get_T_camera_lidar(stage), stage)
@@ -601,7 +633,9 @@ class Calibrator:
         if stage == "calibrate":
             given = None if self._given is None else self._given.values
             return _plain({"refine": c["refine"], "start": given})
-        return _plain({"assess": c["assess"], "refine": c["refine"]})
+        start = self._report_start()
+        stated = None if start is None else start.uncertainty
+        return _plain({"assess": c["assess"], "refine": c["refine"], "start_uncertainty": stated})
 
     def _remember(self, stage: str, calib=None) -> None:
         """Record what made ``stage``'s product (in memory, and in calib.json when given)."""
@@ -650,3 +684,22 @@ class Calibrator:
 
 def _detail(line: str) -> None:
     log.info("    %s", line)
+
+
+def _uncertainty_record(uncertainty) -> dict | None:
+    """A start's stated uncertainty as ``calib.json`` records it (None: not stated)."""
+    if uncertainty is None:
+        return None
+    return {"translation_m": float(uncertainty[0]), "rotation_deg": float(uncertainty[1])}
+
+
+def _uncertainty_from_record(record) -> tuple[float, float] | None:
+    """The stated uncertainty a record holds, or None (not stated, or not readable)."""
+    from nbcalib.products import check_uncertainty
+
+    if not isinstance(record, dict):
+        return None
+    try:
+        return check_uncertainty((record.get("translation_m"), record.get("rotation_deg")))
+    except ValueError:
+        return None

@@ -42,6 +42,7 @@ __all__ = [
     "Start",
     "VirtualCamera",
     "as_stored_values",
+    "check_uncertainty",
 ]
 
 
@@ -129,26 +130,38 @@ class Start:
     source : str
         Where it came from, for records and messages (``--init``, ``T_init``,
         ``init_T_lidar_camera_auto``...).
+    uncertainty : tuple of 2 float or None
+        How far the start may be from the truth, as a bound at the report's confidence: metres
+        (camera centre) and degrees (``--init-uncertainty``); None when not stated (the
+        verdict then takes the trust region of fine registration as the start's uncertainty:
+        :mod:`nbcalib.report.quality`).
     """
 
     values: tuple
     source: str
+    uncertainty: tuple | None = None
+
+    def __post_init__(self):
+        if self.uncertainty is not None:
+            object.__setattr__(
+                self, "uncertainty", check_uncertainty(self.uncertainty, self.source)
+            )
 
     @classmethod
-    def from_matrix(cls, T_camera_lidar, source: str) -> Start:
+    def from_matrix(cls, T_camera_lidar, source: str, uncertainty=None) -> Start:
         """A start from a 4 x 4 ``T_camera_lidar`` (checked)."""
         from nbcalib.transforms import validate_T
 
         T = validate_T(np.asarray(T_camera_lidar, dtype=np.float64), source)
-        return cls(tuple(as_stored_values(T)), source)
+        return cls(tuple(as_stored_values(T)), source, uncertainty)
 
     @classmethod
-    def from_values(cls, values, source: str) -> Start:
+    def from_values(cls, values, source: str, uncertainty=None) -> Start:
         """A start from ``T_lidar_camera`` as ``[x, y, z, qx, qy, qz, qw]`` (checked)."""
         from nbcalib.io.calib_json import T_camera_lidar_from_values
 
         T_camera_lidar_from_values(list(values), what=source)
-        return cls(tuple(float(v) for v in values), source)
+        return cls(tuple(float(v) for v in values), source, uncertainty)
 
     @property
     def T_camera_lidar(self) -> np.ndarray:
@@ -156,6 +169,22 @@ class Start:
         from nbcalib.io.calib_json import T_camera_lidar_from_values
 
         return T_camera_lidar_from_values(list(self.values), what=self.source)
+
+
+def check_uncertainty(value, what: str = "uncertainty") -> tuple[float, float]:
+    """``(metres, degrees)``, two finite numbers >= 0, or a ValueError naming ``what``."""
+    try:
+        metres, degrees = (float(v) for v in value)
+    except (TypeError, ValueError):
+        raise ValueError(
+            f"the uncertainty of {what} must be two numbers, metres and degrees, got {value!r}"
+        ) from None
+    if not (np.isfinite(metres) and np.isfinite(degrees) and metres >= 0 and degrees >= 0):
+        raise ValueError(
+            f"the uncertainty of {what} must be two finite numbers >= 0 (metres, degrees), "
+            f"got {metres}, {degrees}"
+        )
+    return metres, degrees
 
 
 @dataclass

@@ -23,6 +23,7 @@ from nbcalib.registration.refine import (
     downscale_image,
     refine,
 )
+from nbcalib.registration.trust import TrustRegion
 from nbcalib.transforms import invert_T, pose_error, pose_from_xyz_quat, pose_to_xyz_quat, se3_exp
 from nbcalib.workdir import WorkDir, make_calib
 from tests.test_nid import textured_scene
@@ -65,6 +66,38 @@ def test_calibrate_recovers_the_truth_from_init(workdir, capsys):
     assert "outer 1 (level 0): NID" in err and "level 1" not in err
 
 
+def test_a_result_held_by_the_trust_region_is_flagged_and_judged_suspect(workdir, capsys):
+    """5 cm off, a 2 cm / 0.5 deg region: the result ends on its edge; the report says so."""
+    T_start = se3_exp(np.array([0.04, -0.03, 0.02, 0.012, -0.008, 0.01]))
+    init = ",".join(f"{v:.9f}" for v in pose_to_xyz_quat(invert_T(T_start)))
+    args = ["--trust-translation", "0.02", "--trust-rotation", "0.5"]
+    args += ["--init-uncertainty", "0.005", "0.1"]
+    assert main(["calibrate", str(workdir.path), f"--init={init}", *args]) == 0
+    assert "ON THE TRUST REGION'S EDGE" in capsys.readouterr().out
+    calib = read_calib_json(workdir.calib_path)
+    fig = calib.nbcalib["calibration"]
+    assert fig["trust_region"] == {"translation_m": 0.02, "rotation_deg": 0.5}
+    assert fig["at_trust_boundary"] is True
+    assert fig["start_uncertainty"] == {"translation_m": 0.005, "rotation_deg": 0.1}
+    moved = fig["change_from_start"]
+    assert moved["translation_m"] <= 0.02 + 1e-9 and moved["rotation_deg"] <= 0.5 + 1e-9
+    assert calib.nbcalib["config"]["refine"]["trust_translation"] == 0.02
+
+    # the report, run on its own, reads the region and the start's uncertainty back
+    assert main(["report", str(workdir.path)]) == 0
+    out = capsys.readouterr().out
+    assert "verdict: suspect" in out and "reached the trust region around the start" in out
+    assert "the start's (stated, 0.5 cm, 0.10 deg) and the result's uncertainties allow" in out
+    assert "from the start" in out and "ON ITS EDGE" in out
+    quality = read_calib_json(workdir.calib_path).nbcalib["quality"]
+    move = quality["move_from_start"]
+    assert move["at_trust_boundary"] is True
+    assert move["start_uncertainty"]["source"] == "stated"
+    assert move["allowed_translation_m"] < move["translation_m"]
+    page = (workdir.path / "report" / "index.html").read_text()
+    assert "Move from the start" in page and "ON ITS EDGE" in page
+
+
 def test_calibrate_starts_from_the_initial_guess_in_calib_json(workdir):
     calib = read_calib_json(workdir.calib_path)
     calib.set_T_camera_lidar(
@@ -83,6 +116,9 @@ def test_calibrate_starts_from_the_initial_guess_in_calib_json(workdir):
         (["--init", "a,b,c,d,e,f,g"], "7 numbers"),
         ([], "no initial guess"),
         (["--pairs", "0", "--init", "0,0,0,0,0,0,1"], "--pairs"),
+        (["--init-uncertainty", "0.05", "1"], "--init-uncertainty needs --init"),
+        (["--init", "0,0,0,0,0,0,1", "--init-uncertainty", "x", "1"], "two numbers"),
+        (["--init", "0,0,0,0,0,0,1", "--trust-rotation", "-1"], "trust_rotation_deg"),
     ],
 )
 def test_calibrate_user_errors(workdir, capsys, args, message):
@@ -196,6 +232,9 @@ def test_hybrid_runs_nelder_mead_then_lbfgs_at_full_resolution(rng):
     assert result.converged
     dt, dr = pose_error(invert_T(result.T_camera_lidar), np.eye(4))
     assert dt < 0.005 and dr < 0.05, (dt, dr)
+    # well inside the default trust region (0.5 m / 5 deg): not on its edge
+    assert not result.at_trust_boundary
+    assert abs(result.moved_translation - 0.037) < 0.006 and result.moved_rotation_deg < 1.4
     with pytest.raises(ValueError, match="optimizer"):
         RefineConfig(optimizer="bfgs")
 
@@ -218,20 +257,51 @@ def test_pyramid_levels_keep_a_minimum_image_size():
     )
 
 
-def test_refine_stops_when_it_wanders_from_the_initial_guess(rng):
-    """A flat cost must not carry the pose metres away: stop, unconverged, and say why."""
+@pytest.mark.parametrize("optimizer", ["lbfgs", "nelder_mead", "hybrid"])
+def test_refine_stays_in_the_trust_region_when_the_minimum_lies_outside(rng, optimizer):
+    """The truth is 8 cm from the start, the region 3 cm / 1 deg: the run ends on its edge."""
     cam = example_camera("plumb_bob", 320, 240)
-    image, points, intensities = textured_scene(cam, rng, n=5000, blur=0.8)
-    T_start = se3_exp(np.array([0.3, 0.0, 0.0, 0.0, 0.0, 0.0]))  # 30 cm off
+    image, points, intensities = textured_scene(cam, rng, n=20000, blur=0.8)
+    T_start = se3_exp(np.array([0.08, 0.0, 0.0, 0.0, 0.0, 0.0]))  # 8 cm off
     config = RefineConfig(
-        optimizer="lbfgs",
+        optimizer=optimizer,
         pyramid_levels=0,
         hidden_point_removal=False,
         parallel=False,
-        max_total_translation=0.05,
+        max_outer=4,
+        trust_translation=0.03,
+        trust_rotation_deg=1.0,
     )
-    result = refine([RegistrationPair(cam, image, points, intensities)], T_start, config)
-    assert not result.converged
-    assert "from the initial guess" in result.stopped
-    with pytest.raises(ValueError, match="max_total_translation"):
-        RefineConfig(max_total_translation=-1.0)
+    seen = []
+    pair = RegistrationPair(cam, image, points, intensities)
+    result = refine([pair], T_start, config, progress=lambda i, step: seen.append(i))
+    region = TrustRegion(T_start, 0.03, 1.0)
+    dt, dr = pose_error(invert_T(result.T_camera_lidar), invert_T(T_start))
+    assert dt <= 0.03 * (1 + 1e-9) and dr <= 1.0 * (1 + 1e-9), (dt, dr)
+    assert result.at_trust_boundary and region.on_boundary(result.T_camera_lidar)
+    assert result.moved == pytest.approx((dt, dr))
+    assert result.stopped == "" and result.trust_translation == 0.03 and seen
+    np.testing.assert_array_equal(result.T_init, T_start)
+    # it went towards the truth, as far as the region lets it
+    assert pose_error(invert_T(result.T_camera_lidar), np.eye(4))[0] < 0.08 - 0.025
+
+
+def test_trust_region_settings_are_checked_and_the_old_names_still_read():
+    from nbcalib.config import CalibrationConfig, config_from_record, set_values
+
+    for bad in ({"trust_translation": -1.0}, {"trust_rotation_deg": -1.0}):
+        with pytest.raises(ValueError, match=next(iter(bad))):
+            RefineConfig(**bad)
+    with pytest.raises(ValueError, match="trust_rotation_deg"):
+        RefineConfig(trust_rotation_deg=180.0)
+    # config files and records written before the rename
+    config = set_values(CalibrationConfig(), {"refine.max_total_translation": 0.3})
+    assert config.refine.trust_translation == 0.3
+    record = {"refine": {"max_total_translation": 0.2, "max_total_rotation_deg": 3.0}}
+    old = config_from_record(record).refine
+    assert (old.trust_translation, old.trust_rotation_deg) == (0.2, 3.0)
+    with pytest.raises(ValueError, match="former name"):
+        set_values(
+            CalibrationConfig(),
+            {"refine.max_total_translation": 0.3, "refine.trust_translation": 0.4},
+        )

@@ -80,6 +80,56 @@ def test_far_initial_guess_is_suspect(pair):
     assert q.init_change[0] == pytest.approx(np.linalg.norm([0.3, 0.0, 0.1]), rel=0.1)
 
 
+def test_a_result_on_the_trust_regions_edge_is_suspect(pair):
+    from nbcalib.registration.refine import RefineConfig
+
+    T_init = se3_exp(np.array([0.05, 0.0, 0.0, 0.0, 0.0, 0.0]))  # camera centre 5 cm away
+    q = assess([pair], np.eye(4), T_init=T_init, config=RefineConfig(trust_translation=0.05))
+    assert q.at_trust_boundary and q.trust_region == (0.05, 5.0)
+    assert q.verdict == "suspect"
+    assert "reached the trust region around the start: moved 0.050 m / 0.00 deg" in " ".join(
+        q.reasons
+    ), q.reasons
+    move = q.to_dict()["move_from_start"]
+    assert move["at_trust_boundary"] is True and move["trust_region"]["translation_m"] == 0.05
+    # with the default region (0.5 m) the same result is fine
+    ok = assess([pair], np.eye(4), T_init=T_init)
+    assert not ok.at_trust_boundary and ok.verdict == "ok", ok.reasons
+
+
+def test_a_move_beyond_the_stated_uncertainties_is_suspect(pair, quality_at_truth):
+    u = quality_at_truth.uncertainty["translation_total_cm"] / 100.0
+    start_u = 0.5 * u
+    allowed = float(np.hypot(start_u, u))
+    T_init = se3_exp(np.array([1.5 * allowed, 0.0, 0.0, 0.0, 0.0, 0.0]))
+    q = assess([pair], np.eye(4), T_init=T_init, start_uncertainty=(start_u, 5.0))
+    assert q.move_allowed[0] == pytest.approx(allowed, rel=1e-9)
+    assert q.start_uncertainty_used == ((start_u, 5.0), "stated")
+    assert q.verdict == "suspect"
+    reason = next(r for r in q.reasons if r.startswith("moved "))
+    assert f"moved {150 * allowed:.1f} cm from the start, more than the {100 * allowed:.1f} cm" in (
+        reason
+    )
+    assert "deg" not in reason.split("the start's")[0]  # the rotation stayed within its share
+    move = q.to_dict()["move_from_start"]
+    assert move["allowed_translation_m"] == pytest.approx(allowed)
+    assert move["start_uncertainty"]["source"] == "stated"
+    # a move the uncertainties allow is no reason
+    near = se3_exp(np.array([0.5 * allowed, 0.0, 0.0, 0.0, 0.0, 0.0]))
+    fine = assess([pair], np.eye(4), T_init=near, start_uncertainty=(start_u, 5.0))
+    assert not any(r.startswith("moved ") for r in fine.reasons), fine.reasons
+    # nothing stated: the trust region (0.5 m / 5 deg) is the start's uncertainty
+    unstated = assess([pair], np.eye(4), T_init=T_init)
+    assert unstated.start_uncertainty_used == ((0.5, 5.0), "trust region")
+    assert unstated.move_allowed[0] > 0.5 and unstated.verdict == "ok", unstated.reasons
+    # rejudge keeps the start and recomputes what it allows at the new confidence
+    wider = rejudge(q, AssessConfig(confidence=0.999))
+    assert wider.start_uncertainty == q.start_uncertainty
+    assert wider.move_allowed[0] > q.move_allowed[0]
+    with pytest.raises(ValueError, match="uncertainty"):
+        assess([pair], np.eye(4), T_init=T_init, start_uncertainty=(-1.0, 1.0))
+
+
 def test_mismatched_image_is_suspect(pair, rng):
     other = gaussian_filter(rng.random(pair.image.shape), 2.0)
     other = np.round(255 * (other - other.min()) / np.ptp(other)).astype(np.uint8)

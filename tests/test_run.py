@@ -108,6 +108,35 @@ def test_run_resumes_without_redoing_finished_stages(finished, tmp_path, caplog,
     assert "ran nothing" in capsys.readouterr().out
 
 
+def test_init_uncertainty_judges_the_move_and_restating_it_redoes_only_the_report(
+    finished, tmp_path, caplog
+):
+    work = _copy(finished, tmp_path)
+    calib = read_calib_json(work / "calib.json")
+    calib.nbcalib["run"]["no_report"] = False  # the report this time
+    (work / "calib.json").write_text(json.dumps(calib.to_dict()))
+    caplog.set_level("INFO", logger="nbcalib")
+    assert main(["run", str(work), "--init-uncertainty", "0.002", "0.05"]) == 0
+    assert "calibrate: skipped (done)" in caplog.text
+    calib = read_calib_json(work / "calib.json")
+    assert calib.nbcalib["run"]["init_uncertainty"] == ["0.002", "0.05"]
+    assert calib.nbcalib["calibration"]["start_uncertainty"] == {
+        "translation_m": 0.002,
+        "rotation_deg": 0.05,
+    }
+    move = calib.nbcalib["quality"]["move_from_start"]
+    assert move["start_uncertainty"]["source"] == "stated"
+    # ~5 cm and ~1 deg from a start stated to within 2 mm / 0.05 deg: too far
+    assert any(r.startswith("moved ") for r in calib.nbcalib["quality"]["reasons"])
+    caplog.clear()
+    assert main(["run", str(work), "--init-uncertainty", "0.1", "2"]) == 0
+    assert "calibrate: skipped (done)" in caplog.text
+    assert "settings changed: start_uncertainty" in caplog.text
+    quality = read_calib_json(work / "calib.json").nbcalib["quality"]
+    assert not any(r.startswith("moved ") for r in quality["reasons"])
+    assert quality["move_from_start"]["start_uncertainty"]["translation_m"] == 0.1
+
+
 def test_run_continues_an_interrupted_job(finished, tmp_path, caplog):
     work = _copy(finished, tmp_path)
     calib = read_calib_json(work / "calib.json")
@@ -198,6 +227,11 @@ def test_yaml_config_and_write_config_round_trip(tmp_path):
     settings, other = file_settings(data, tmp_path / "c.yaml")
     assert settings["refine.bins"] == 8 and settings["preprocess.odometry.knn"] == 12
     assert other["inputs"] == {"inputs": ["a.bag"]}
+    # the former names of the trust region (max_total_*) still read, with a warning
+    old = {"refine": {"max_total_translation": 0.3}, "init-uncertainty": [0.05, 1.0]}
+    settings, other = file_settings(old, tmp_path / "old.toml")
+    assert settings == {"refine.trust_translation": 0.3}
+    assert other == {"init_uncertainty": [0.05, 1.0]}
     (tmp_path / "twice.yaml").write_text("bins: 3\ncalibrate:\n  bins: 4\n")
     with pytest.raises(ValueError, match="given twice"):
         file_settings(read_config_file(tmp_path / "twice.yaml"), tmp_path / "twice.yaml")

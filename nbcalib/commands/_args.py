@@ -16,6 +16,7 @@ __all__ = [
     "add_verbosity_arguments",
     "input_spec",
     "parse_pose",
+    "parse_start",
     "split_workdir",
     "stage_calibrator",
     "stage_parser",
@@ -164,6 +165,40 @@ def parse_pose(text: str, option: str):
     if len(values) != 7:
         raise InputError(f"{option} must be 7 numbers x,y,z,qx,qy,qz,qw, got {len(values)}")
     return Start.from_values(values, option)
+
+
+def parse_start(text, uncertainty=None, option: str = "--init"):
+    """``--init`` (``parse_pose``) with its ``--init-uncertainty METRES DEGREES``, or None.
+
+    Raises
+    ------
+    InputError
+        A malformed pose or uncertainty, or an uncertainty without a pose.
+    """
+    from dataclasses import replace
+
+    from nbcalib.products import check_uncertainty
+
+    if not text:
+        if uncertainty is not None:
+            raise InputError(f"{option}-uncertainty needs {option} POSE (the start it describes)")
+        return None
+    start = parse_pose(text, option)
+    if uncertainty is None:
+        return start
+    try:
+        return replace(start, uncertainty=check_uncertainty(uncertainty, option))
+    except ValueError as exc:
+        raise InputError(f"{option}-uncertainty: {exc}") from None
+
+
+#: Help of ``--init-uncertainty`` (``calibrate`` and ``run``).
+INIT_UNCERTAINTY_HELP = (
+    "how far --init may be from the truth (metres of camera centre, degrees), at the report's "
+    "confidence; the verdict calls a result suspect that moved farther from the start than "
+    "this and its own uncertainty allow (default: the trust region, --trust-translation / "
+    "--trust-rotation)"
+)
 
 
 def stage_calibrator(args: argparse.Namespace, own: tuple[str, ...]):

@@ -13,11 +13,14 @@ The same table reads config files whose keys are option names (``voxel-size = 0.
 from __future__ import annotations
 
 import argparse
+import logging
 from dataclasses import dataclass, fields
 from typing import Any
 
-from nbcalib.config import SECTIONS, CalibrationConfig, set_values
+from nbcalib.config import SECTIONS, CalibrationConfig, renamed_settings, set_values
 from nbcalib.errors import InputError
+
+log = logging.getLogger("nbcalib")
 
 __all__ = [
     "ASSESS",
@@ -49,7 +52,7 @@ class Option:
         ``section.field`` (or ``seed``); empty for options that are not settings (inputs).
     help : str
         Help text; the default is appended from the setting.
-    metavar : str or None
+    metavar : str, tuple of str or None
     value : object
         For options without an argument (``--dynamic``): the value they set.
     choices : tuple or None
@@ -59,7 +62,7 @@ class Option:
     flag: str
     setting: str
     help: str
-    metavar: str | None = None
+    metavar: str | tuple | None = None
     value: Any = _FLAG
     choices: tuple | None = None
 
@@ -206,6 +209,12 @@ REFINE = (
     Option("--pairs", "refine.max_pairs", "use only the first N pairs", "N"),
     Option("--pyramid-levels", "refine.pyramid_levels",
            "coarse image levels before the full resolution (0: full resolution only)", "N"),
+    Option("--trust-translation", "refine.trust_translation",
+           "trust region of the whole run: the camera centre stays within M metres of the "
+           "start's", "M"),
+    Option("--trust-rotation", "refine.trust_rotation_deg",
+           "trust region of the whole run: the rotation stays within DEG degrees of the "
+           "start's", "DEG"),
 )  # fmt: skip
 
 ASSESS = (Option("--confidence", "assess.confidence", "confidence of the stated intervals", "P"),)
@@ -308,8 +317,13 @@ def file_settings(data: dict, path) -> tuple[dict, dict]:
             entries += [(key, k, v) for k, v in value.items()]
         else:
             entries.append((None, key, value))
+    renamed = renamed_settings()
     for table, key, value in entries:
         name = str(key).lstrip("-").replace("-", "_")
+        if f"{table}.{name}" in renamed:
+            new = renamed[f"{table}.{name}"]
+            log.warning("%s: %s.%s is now called %s", path, table, name, new)
+            name = new.partition(".")[2]
         if table in SECTIONS and name in {f.name for f in fields(SECTIONS[table])}:
             if isinstance(value, dict):  # a nested table: [preprocess.odometry]
                 from nbcalib.config import flatten

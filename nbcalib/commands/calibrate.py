@@ -23,14 +23,19 @@ examples:
   nbcalib calibrate work/ --optimizer lbfgs                # L-BFGS alone, over the pyramid
   nbcalib calibrate work/ --pairs 1 --window 1              # first pair only, 3x3 visibility test
   nbcalib calibrate work/ --pyramid-levels 0                # full resolution only (reference)
+  nbcalib calibrate work/ --trust-translation 0.1 --trust-rotation 2   # stay within 10 cm / 2 deg
+  nbcalib calibrate work/ --init 0.1,-0.05,0.02,0.5,-0.5,0.5,0.5 --init-uncertainty 0.05 1
 
 --init takes T_lidar_camera as x,y,z,qx,qy,qz,qw (metres, quaternion xyzw), the calib.json layout;
-settings not given take their defaults.
+settings not given take their defaults. The run never leaves the trust region around its start
+(--trust-translation metres of camera centre, --trust-rotation degrees); a result on its edge is
+flagged, and the report calls it suspect.
 """
 
 
 def add_parser(subparsers, formatter_class) -> argparse.ArgumentParser:
     """Register ``calibrate``."""
+    from nbcalib.commands._args import INIT_UNCERTAINTY_HELP
     from nbcalib.commands._options import REFINE, add_options
 
     p = subparsers.add_parser(
@@ -42,6 +47,7 @@ def add_parser(subparsers, formatter_class) -> argparse.ArgumentParser:
     )
     p.add_argument("workdir", metavar="WORKDIR", help="work directory made by nbcalib preprocess")
     p.add_argument("--init", metavar="X,Y,Z,QX,QY,QZ,QW", help="start from this T_lidar_camera")
+    p.add_argument("--init-uncertainty", nargs=2, metavar=("M", "DEG"), help=INIT_UNCERTAINTY_HELP)
     add_options(p.add_argument_group("fine registration"), REFINE)
     return p
 
@@ -50,11 +56,11 @@ def run(args) -> int:
     """Refine from the start pose, write the result, print it."""
     import numpy as np
 
-    from nbcalib.commands._args import parse_pose, stage_calibrator
+    from nbcalib.commands._args import parse_start, stage_calibrator
     from nbcalib.transforms import invert_T, pose_error
 
+    init = parse_start(args.init, args.init_uncertainty)
     calibrator = stage_calibrator(args, ("refine",))
-    init = parse_pose(args.init, "--init") if args.init else None
     t0 = time.perf_counter()
     calibrator.run(init=init, only="calibrate")
     result = calibrator.refinement
@@ -62,10 +68,17 @@ def run(args) -> int:
     dt, dr = pose_error(invert_T(result.T_camera_lidar), invert_T(start.T_camera_lidar))
     values = calibrator.work.read_calib().results["T_lidar_camera"]
     stopped = "converged" if result.converged else result.stopped or "stopped at --max-outer"
+    edge = ""
+    if result.at_trust_boundary:
+        edge = (
+            f"; ON THE TRUST REGION'S EDGE ({result.trust_translation} m / "
+            f"{result.trust_rotation_deg} deg around the start): the optimum may lie beyond"
+        )
     print(
         f"T_lidar_camera = [{', '.join(f'{v:.6f}' for v in values)}]  (x y z qx qy qz qw)\n"
         f"NID {result.history[0].nid_start:.5f} -> {result.nid:.5f}, moved "
         f"{100 * dt:.2f} cm {dr:.3f} deg from the start, {len(result.history)} outer iterations "
-        f"({stopped}), {time.perf_counter() - t0:.1f} s; written to {calibrator.work.calib_path}"
+        f"({stopped}){edge}, {time.perf_counter() - t0:.1f} s; written to "
+        f"{calibrator.work.calib_path}"
     )
     return 0 if np.all(np.isfinite(result.T_camera_lidar)) else 1

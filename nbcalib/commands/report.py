@@ -10,6 +10,9 @@ the image (by range and by intensity) before and after refinement, image edges a
 edges, the NID along each of the six axes around the result, per-pair NID and their spread, an
 uncertainty in centimetres and degrees, and a verdict, ok or suspect, with its reasons. The
 figures need matplotlib (pip install "nbcalib[viz]"); without it the page has numbers only.
+The page and the printout also show how far the result moved from its start, against what the
+start's uncertainty (--init-uncertainty, else the trust region) and the result's allow, and
+whether it ended on the edge of the trust region (both make the verdict suspect).
 The quality figures are also stored in calib.json under nbcalib.quality.
 Prints the verdict on stdout; exits 0 whatever the verdict (--strict: 3 when suspect).
 """
@@ -57,11 +60,15 @@ def run(args) -> int:
 
 def print_verdict(report) -> None:
     """The verdict, its reasons, the uncertainty and where the report is (``nbcalib run`` too)."""
+    from nbcalib.report.html import move_summary
+
     u = report.uncertainty
+    move = move_summary(report.quality)
     print(
         f"verdict: {report.verdict}"
         + "".join(f"\n  - {reason}" for reason in report.reasons)
         + f"\nuncertainty ({100 * u['confidence']:.0f} %): translation <= "
         f"{u['translation_total_cm']:.2f} cm, rotation <= {u['rotation_total_deg']:.3f} deg"
-        f"\nreport: {report.html_path}"
+        + (f"\n{move}" if move else "")
+        + f"\nreport: {report.html_path}"
     )

@@ -14,10 +14,12 @@ import argparse
 import logging
 
 from nbcalib.commands._args import (
+    INIT_UNCERTAINTY_HELP,
     add_input_arguments,
     add_verbosity_arguments,
     input_spec,
     parse_pose,
+    parse_start,
     split_workdir,
 )
 from nbcalib.commands._options import (
@@ -56,6 +58,8 @@ examples:
   nbcalib run --points lidar.pcd --image image.png work/ --camera camera.yaml
   nbcalib run scans/*.bin image.png work/ --camera camera.yaml --init -0.1,0,0,0.5,-0.5,0.5,0.5
   nbcalib run --frames kitti_raw/ work/ --camera calib.json --every 4 --neighbors 10
+  nbcalib run scans/*.bin image.png work/ --camera camera.yaml --no-matching \\
+      --init -0.1,0,0,0.5,-0.5,0.5,0.5 --init-uncertainty 0.05 2 --trust-translation 0.2
   nbcalib run work/                                              # continue an interrupted job
   nbcalib run work/ --from calibrate --optimizer nelder_mead     # redo the last stages
   nbcalib run --config job.toml data.bag work/
@@ -84,6 +88,7 @@ RUN_OPTIONS = (
     Option("--no-report", "", "skip the report", value=True),
     Option("--init", "", "T_lidar_camera x,y,z,qx,qy,qz,qw: the start when the automatic guess "
            "fails (with --no-matching: the start)", "X,Y,Z,QX,QY,QZ,QW"),
+    Option("--init-uncertainty", "", INIT_UNCERTAINTY_HELP, ("M", "DEG")),
     Option("--manual", "", "hand-picked correspondences (nbcalib initial-guess --help)", "FILE"),
     Option("--prior", "", "rough T_lidar_camera that matching renders its views around",
            "X,Y,Z,QX,QY,QZ,QW"),
@@ -107,7 +112,15 @@ FILE_INPUT_KEYS = (
 )
 
 #: Run options a resumed job (``nbcalib run WORKDIR``) keeps from its record.
-REMEMBERED = ("init", "manual", "prior", "no_matching", "no_report", "model_dir")
+REMEMBERED = (
+    "init",
+    "init_uncertainty",
+    "manual",
+    "prior",
+    "no_matching",
+    "no_report",
+    "model_dir",
+)
 
 
 def add_parser(subparsers, formatter_class=argparse.HelpFormatter) -> argparse.ArgumentParser:
@@ -129,6 +142,8 @@ def add_parser(subparsers, formatter_class=argparse.HelpFormatter) -> argparse.A
             kwargs["metavar"] = option.metavar
             if option.flag in ("--from", "--until"):
                 kwargs["choices"] = STAGES
+            if isinstance(option.metavar, tuple):
+                kwargs["nargs"] = len(option.metavar)
         else:
             kwargs["action"] = "store_true"
         dest = "from_stage" if option.flag == "--from" else option.dest
@@ -188,7 +203,7 @@ def run(args: argparse.Namespace) -> int:
     base = config_from_record(calib.nbcalib.get("config")) if resuming else CalibrationConfig()
     config = build_config(args, base=base, file_values=file_values, file_path=file_path)
 
-    init = parse_pose(options["init"], "--init") if options.get("init") else None
+    init = parse_start(options.get("init"), options.get("init_uncertainty"))
     prior = parse_pose(options["prior"], "--prior") if options.get("prior") else None
     manual = options.get("manual")
     no_matching = bool(options.get("no_matching"))

@@ -13,6 +13,11 @@ same thing without making the line search fail).
 - :func:`minimize_lbfgs`: quasi-Newton with the exact gradient of the smooth NID. The cost's
   gradient is with respect to a left perturbation at ``T(delta)``; the chain rule through the
   SE(3) exponential (``d/d delta = J_l(delta)^T g``) makes it the gradient in the chart.
+
+Given a ``trust_region`` (:class:`nbcalib.registration.trust.TrustRegion`, the bound of the whole
+run around its start), both return only poses inside it: the box is shrunk to what can reach the
+region, a pose outside is evaluated as the cost at its projection plus a penalty, and the pose
+found is projected onto the region (and its cost evaluated there when it moved).
 """
 
 from __future__ import annotations
@@ -20,11 +25,15 @@ from __future__ import annotations
 import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.optimize import minimize
 
 from nbcalib.transforms import hat, se3_exp, so3_left_jacobian
+
+if TYPE_CHECKING:
+    from nbcalib.registration.trust import TrustRegion
 
 __all__ = ["InnerResult", "minimize_lbfgs", "minimize_nelder_mead", "se3_left_jacobian"]
 
@@ -74,6 +83,21 @@ def _bounds(max_translation: float, max_rotation: float):
     return [(-max_translation, max_translation)] * 3 + [(-max_rotation, max_rotation)] * 3
 
 
+def _in_region(result: InnerResult, region, cost) -> InnerResult:
+    """``result`` with its pose projected onto ``region`` and its value the cost there.
+
+    Inside the region the result is returned as it is; a projected pose costs one evaluation
+    more (counted).
+    """
+    if region is None or region.contains(result.T_camera_lidar):
+        return result
+    result.T_camera_lidar = region.project(result.T_camera_lidar)
+    result.value = float(cost(result.T_camera_lidar))
+    result.evaluations += 1
+    result.message = f"{result.message} (projected onto the trust region)"
+    return result
+
+
 def minimize_nelder_mead(
     cost: Callable[[np.ndarray], float],
     T0: np.ndarray,
@@ -84,6 +108,7 @@ def minimize_nelder_mead(
     max_evaluations: int = 2000,
     xatol: float = 1e-6,
     fatol: float = 1e-8,
+    trust_region: TrustRegion | None = None,
 ) -> InnerResult:
     """Minimise ``cost(T)`` over ``T = exp(delta) @ T0`` with Nelder-Mead.
 
@@ -95,11 +120,17 @@ def minimize_nelder_mead(
         Start pose (centre of the chart).
     init_step : float, optional
         Initial simplex size along each tangent axis (metres / radians; reference: 1e-3).
+    trust_region : TrustRegion, optional
+        The region the result must lie in (``T0`` inside it; module docstring).
     """
     history: list[float] = []
+    objective = cost
+    if trust_region is not None:
+        objective = trust_region.penalised_value(cost)
+        max_translation, max_rotation = trust_region.chart_bounds(T0, max_translation, max_rotation)
 
     def f(delta):
-        value = cost(se3_exp(delta) @ T0)
+        value = objective(se3_exp(delta) @ T0)
         history.append(value)
         return value
 
@@ -117,7 +148,7 @@ def minimize_nelder_mead(
             "adaptive": False,
         },
     )
-    return InnerResult(
+    result = InnerResult(
         se3_exp(res.x) @ T0,
         float(res.fun),
         int(res.nit),
@@ -126,6 +157,7 @@ def minimize_nelder_mead(
         str(res.message),
         history,
     )
+    return _in_region(result, trust_region, cost)
 
 
 def minimize_lbfgs(
@@ -137,6 +169,7 @@ def minimize_lbfgs(
     max_iterations: int = 50,
     gtol: float = 1e-10,
     ftol: float = 1e-7,
+    trust_region: TrustRegion | None = None,
 ) -> InnerResult:
     """Minimise ``cost(T)`` over ``T = exp(delta) @ T0`` with box-bounded L-BFGS.
 
@@ -147,11 +180,17 @@ def minimize_lbfgs(
         a left perturbation ``exp(d) @ T`` at ``T`` (as :meth:`NIDCost.value_and_grad`).
     T0 : ndarray of shape (4, 4)
         Start pose (centre of the chart).
+    trust_region : TrustRegion, optional
+        The region the result must lie in (``T0`` inside it; module docstring).
     """
     history: list[float] = []
+    objective = cost_and_grad
+    if trust_region is not None:
+        objective = trust_region.penalised_value_and_grad(cost_and_grad)
+        max_translation, max_rotation = trust_region.chart_bounds(T0, max_translation, max_rotation)
 
     def f(delta):
-        value, g = cost_and_grad(se3_exp(delta) @ T0)
+        value, g = objective(se3_exp(delta) @ T0)
         history.append(value)
         return value, se3_left_jacobian(delta).T @ g
 
@@ -163,7 +202,7 @@ def minimize_lbfgs(
         bounds=_bounds(max_translation, max_rotation),
         options={"maxiter": max_iterations, "gtol": gtol, "ftol": ftol},
     )
-    return InnerResult(
+    result = InnerResult(
         se3_exp(res.x) @ T0,
         float(res.fun),
         int(res.nit),
@@ -172,3 +211,4 @@ def minimize_lbfgs(
         str(res.message),
         history,
     )
+    return _in_region(result, trust_region, lambda T: cost_and_grad(T)[0])

@@ -14,6 +14,11 @@ Each outer iteration
    of the plain NID;
 3. stops when the pose moved less than ``converge_translation`` and ``converge_rotation_deg``.
 
+The whole run stays in a trust region around its initial guess (``trust_translation``,
+``trust_rotation_deg``; :mod:`nbcalib.registration.trust`): every inner minimisation returns a
+pose inside it, and :attr:`RefineResult.at_trust_boundary` says when the result ended on its
+edge (its optimum may lie beyond).
+
 The whole loop runs coarse to fine over an image pyramid (``pyramid_levels``): at level ``k`` the
 image is averaged over ``2^k x 2^k`` blocks, re-equalised, and the camera's focal lengths and
 principal point are scaled to match, so the B-spline NID spans ``4 * 2^k`` full-resolution pixels.
@@ -44,6 +49,7 @@ from nbcalib.camera import CameraModel, create_camera
 from nbcalib.registration.config import RefineConfig
 from nbcalib.registration.nid import MultiNIDCost, NIDCost
 from nbcalib.registration.optimize import InnerResult, minimize_lbfgs, minimize_nelder_mead
+from nbcalib.registration.trust import TrustRegion, on_trust_boundary
 from nbcalib.transforms import invert_T, pose_error, validate_T
 
 __all__ = [
@@ -163,13 +169,45 @@ class OuterIteration:
 class RefineResult:
     """Result of :func:`refine`: the pose, the per-iteration history and totals.
 
-    ``stopped`` says why a run was cut short (empty when it converged or used its iterations).
+    ``stopped`` says why a run was cut short (empty when it converged or used its iterations;
+    no setting cuts a run short now: the trust region bounds it instead). ``T_init`` is the
+    initial guess and ``trust_translation`` / ``trust_rotation_deg`` the trust region around it
+    that the run stayed in (:mod:`nbcalib.registration.trust`).
     """
 
     T_camera_lidar: np.ndarray
     history: list[OuterIteration] = field(default_factory=list)
     converged: bool = False
     stopped: str = ""
+    T_init: np.ndarray | None = None
+    trust_translation: float | None = None
+    trust_rotation_deg: float | None = None
+
+    @property
+    def moved(self) -> tuple[float, float]:
+        """Distance of the result from ``T_init``: metres (camera centre) and degrees."""
+        if self.T_init is None:
+            return math.nan, math.nan
+        dt, dr = pose_error(invert_T(self.T_camera_lidar), invert_T(self.T_init))
+        return float(dt), float(dr)
+
+    @property
+    def moved_translation(self) -> float:
+        """How far the camera centre moved from the start, metres (LiDAR frame)."""
+        return self.moved[0]
+
+    @property
+    def moved_rotation_deg(self) -> float:
+        """How far the rotation moved from the start, degrees."""
+        return self.moved[1]
+
+    @property
+    def at_trust_boundary(self) -> bool:
+        """The result lies on the edge of the trust region (its optimum may lie beyond)."""
+        if self.T_init is None or self.trust_translation is None:
+            return False
+        region = (self.trust_translation, self.trust_rotation_deg)
+        return on_trust_boundary(self.moved, region)
 
     @property
     def nid(self) -> float:
@@ -349,7 +387,13 @@ def refine(
     if not pairs:
         raise ValueError("refine needs at least one LiDAR-camera pair")
     T = validate_T(np.asarray(T_camera_lidar_init, dtype=np.float64), "T_camera_lidar_init")
-    result = RefineResult(T.copy())
+    result = RefineResult(
+        T.copy(),
+        T_init=T.copy(),
+        trust_translation=config.trust_translation,
+        trust_rotation_deg=config.trust_rotation_deg,
+    )
+    region = TrustRegion(T, config.trust_translation, config.trust_rotation_deg)
     if config.optimizer == "hybrid":
         # Nelder-Mead on the hard NID over the pyramid finds the basin; L-BFGS on the smooth
         # NID at full resolution then polishes (docs/BENCHMARKS.md, "hybrid optimiser")
@@ -360,24 +404,26 @@ def refine(
     else:
         stages = [config]
     for stage in stages:
-        if not _run_levels(pairs, T, stage, result, progress):
-            break
+        _run_levels(pairs, region, stage, result, progress)
     return result
 
 
-def _run_levels(pairs, T_init, config: RefineConfig, result: RefineResult, progress) -> bool:
-    """Outer iterations from ``result.T_camera_lidar``, coarse to fine; False when stopped.
+def _run_levels(
+    pairs, region: TrustRegion, config: RefineConfig, result: RefineResult, progress
+) -> None:
+    """Outer iterations from ``result.T_camera_lidar``, coarse to fine, inside ``region``.
 
-    ``T_init`` is the caller's initial guess, from which the total motion is bounded.
+    ``region`` is the trust region around the caller's initial guess: every outer iteration's
+    pose lies in it (the inner minimisations return only poses inside), so the run may slide
+    along its edge but never leaves it.
     """
     T = result.T_camera_lidar.copy()
     max_rot = math.radians(config.max_rotation_deg)
-    max_total_rot = config.max_total_rotation_deg
     for level in range(_usable_levels(pairs, config), -1, -1):
         # coarse levels only bring the pose into the finest level's basin: looser stop
         scale = 2**level
         for _ in range(config.max_outer):
-            step, T_new = _outer_iteration(pairs, T, config, level, max_rot)
+            step, T_new = _outer_iteration(pairs, T, config, level, max_rot, region)
             dt, dr = step.translation_change, step.rotation_change_deg
             outer = len(result.history)
             result.history.append(step)
@@ -385,14 +431,6 @@ def _run_levels(pairs, T_init, config: RefineConfig, result: RefineResult, progr
             result.T_camera_lidar = T.copy()
             if progress is not None:
                 progress(outer, step)
-            moved_t, moved_r = pose_error(invert_T(T), invert_T(T_init))
-            if moved_t > config.max_total_translation or moved_r > max_total_rot:
-                result.converged = False
-                result.stopped = (
-                    f"moved {moved_t:.2f} m / {moved_r:.1f} deg from the initial guess, beyond "
-                    f"{config.max_total_translation} m / {max_total_rot} deg: stopped"
-                )
-                return False
             if (
                 dt < scale * config.converge_translation
                 and dr < scale * config.converge_rotation_deg
@@ -401,7 +439,6 @@ def _run_levels(pairs, T_init, config: RefineConfig, result: RefineResult, progr
                 break
         else:
             result.converged = False
-    return True
 
 
 def _usable_levels(pairs: Sequence[RegistrationPair], config: RefineConfig) -> int:
@@ -413,8 +450,13 @@ def _usable_levels(pairs: Sequence[RegistrationPair], config: RefineConfig) -> i
     return levels
 
 
-def _outer_iteration(pairs, T, config: RefineConfig, level: int, max_rot: float):
-    """Hidden-point removal at ``T``, then one inner minimisation at pyramid ``level``."""
+def _outer_iteration(
+    pairs, T, config: RefineConfig, level: int, max_rot: float, region: TrustRegion | None = None
+):
+    """Hidden-point removal at ``T``, then one inner minimisation at pyramid ``level``.
+
+    The minimisation returns a pose inside ``region`` (the run's trust region) when given.
+    """
     t0 = time.perf_counter()
     cost, counts = build_cost(pairs, T, config, level=level)
     if sum(counts) == 0:
@@ -429,6 +471,7 @@ def _outer_iteration(pairs, T, config: RefineConfig, level: int, max_rot: float)
             max_rotation=max_rot,
             max_iterations=config.max_inner,
             ftol=config.lbfgs_ftol,
+            trust_region=region,
         )
     else:
         inner = minimize_nelder_mead(
@@ -438,6 +481,7 @@ def _outer_iteration(pairs, T, config: RefineConfig, level: int, max_rot: float)
             max_translation=config.max_translation,
             max_rotation=max_rot,
             max_evaluations=40 * config.max_inner,
+            trust_region=region,
         )
     T_new = inner.T_camera_lidar
     if inner.value > start_value:  # never accept a worse pose

@@ -18,7 +18,9 @@ class AssessConfig:
     Attributes
     ----------
     confidence : float
-        Confidence of the stated intervals (0.95).
+        Confidence of the stated intervals (0.95); a start's stated uncertainty
+        (``--init-uncertainty``) is read at the same confidence when the move from the start is
+        checked against the two uncertainties (:mod:`nbcalib.report.quality`).
     scale : float
         Variance scale of the curvature model (:mod:`nbcalib.report.quality`); tuned on
         synthetic pairs by benchmarks/bench_report_coverage.py.
@@ -42,7 +44,9 @@ class AssessConfig:
         A curve's lowest sample farther than this from the result, and lower than it by more
         than ``min_curve_rise / 4``, means the result is not at a minimum.
     max_init_translation, max_init_rotation_deg : float
-        Result and initial guess farther apart than this are "far apart".
+        Result and initial guess farther apart than this are "far apart" (a fixed limit; a
+        result on the edge of fine registration's trust region, or farther from its start than
+        the start's and the result's uncertainties allow, is suspect too, whatever these are).
     max_nid : float
         A mean per-pair NID above this means image and LiDAR share almost no information.
     pair_disagreement_quantile : float

@@ -34,7 +34,7 @@ from nbcalib.io.calib_json import FINAL_STAGE
 from nbcalib.report.config import AssessConfig
 from nbcalib.report.quality import AXIS_NAMES, Quality
 
-__all__ = ["REPORT_DIR", "Report", "make_report", "write_report"]
+__all__ = ["REPORT_DIR", "Report", "make_report", "move_summary", "write_report"]
 
 #: Folder of the report inside the work directory.
 REPORT_DIR = "report"
@@ -280,6 +280,45 @@ def _summary_html(q: Quality) -> str:
     )
 
 
+def move_summary(q: Quality) -> str:
+    """One line on the move from the start: how far, what the uncertainties allow, the region.
+
+    Empty when the start is not known.
+    """
+    if q.init_change is None:
+        return ""
+    dt, dr = q.init_change
+    text = f"moved {100 * dt:.2f} cm, {dr:.3f} deg from the start"
+    if q.move_allowed is not None:
+        used = q.start_uncertainty_used
+        whose = "stated" if used[1] == "stated" else "none stated: the trust region"
+        text += (
+            f" (the start's uncertainty, {whose}, {100 * used[0][0]:.1f} cm / {used[0][1]:.2f} "
+            f"deg, and the result's allow {100 * q.move_allowed[0]:.1f} cm / "
+            f"{q.move_allowed[1]:.2f} deg)"
+        )
+    if q.trust_region is not None:
+        edge = "ON ITS EDGE" if q.at_trust_boundary else "inside"
+        text += (
+            f"; trust region {100 * q.trust_region[0]:.1f} cm / {q.trust_region[1]:.2f} deg: {edge}"
+        )
+    return text
+
+
+def _move_html(q: Quality, init_stage) -> str:
+    if q.init_change is None:
+        return ""
+    line = move_summary(q)
+    return (
+        f"<h2>Move from the start</h2><p>The result {html.escape(line)}. Start: "
+        f"{html.escape(str(init_stage))}.</p>"
+        '<p class="note">A result on the trust region\'s edge may have been held there short of '
+        "its optimum; a move beyond what the two uncertainties allow (sqrt(s&sup2; + "
+        "u&sup2;) at the report's confidence) means the start or the result is off by more "
+        "than stated (docs/pipeline.md, Report).</p>"
+    )
+
+
 def _page(q: Quality, workdir: Path, figures: list[Path], have_mpl: bool, init_stage) -> str:
     from nbcalib.io.calib_json import values_from_T_camera_lidar
 
@@ -320,12 +359,7 @@ def _page(q: Quality, workdir: Path, figures: list[Path], have_mpl: bool, init_s
             )
             + "</p>"
         )
-    init = ""
-    if q.init_change is not None:
-        init = (
-            f"<p>Moved {100 * q.init_change[0]:.2f} cm and {q.init_change[1]:.3f} deg from the "
-            f"initial guess ({html.escape(str(init_stage))}).</p>"
-        )
+    init = _move_html(q, init_stage)
     conv = {True: "yes", False: "no", None: "unknown"}[q.converged]
     stamp = time.strftime("%Y-%m-%d %H:%M:%S UTC", time.gmtime())
     if have_mpl:

@@ -31,11 +31,26 @@ pairs widen the interval. The
 curvature is used rather than a bootstrap because it costs a dozen gradient evaluations per pair,
 where a bootstrap refits the pose tens of times.
 
+**Move from the start.** Fine registration may not leave its trust region around the start
+(:attr:`RefineConfig.trust_translation <nbcalib.registration.config.RefineConfig>`,
+``trust_rotation_deg``); a result on the region's edge may have been stopped there short of its
+optimum. And a result should not move from its start further than the two stated uncertainties
+allow: if the start is within ``s`` of the truth and the result within ``u`` (both bounds at
+:attr:`AssessConfig.confidence`), the move is at most ``sqrt(s^2 + u^2)`` (exact for independent,
+isotropic Gaussian errors, whose difference is Gaussian with the summed variance), separately
+for the camera centre (metres) and the rotation (degrees). ``u`` is the result's total
+uncertainty (``translation_total_cm``, ``rotation_total_deg``); ``s`` the start's stated one
+(``--init-uncertainty``, :attr:`nbcalib.products.Start.uncertainty`), or, when none is stated,
+the trust region itself: the automatic initial guess states none (its reprojection fit says
+nothing of how far its matches are off), so a result outside the trust region is the only move
+it calls too far.
+
 **Verdict.** ``"ok"`` unless one of these holds (each adds a one-line reason): too few points in
 view; a flat cost (an uncertainty above the limits, or a cost that hardly rises along an axis);
 a curve whose lowest sample lies clearly away from the result (not at a minimum); a result far
-from the initial guess; pairs that disagree; an optimiser that did not converge; an NID so high
-that image and LiDAR share almost no information.
+from the initial guess; a result on the edge of the trust region; a move from the start beyond
+what the start's and the result's uncertainties allow; pairs that disagree; an optimiser that
+did not converge; an NID so high that image and LiDAR share almost no information.
 
 Example
 -------
@@ -52,6 +67,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from nbcalib.registration.refine import RefineConfig, RegistrationPair, build_cost, visible_subset
+from nbcalib.registration.trust import on_trust_boundary
 from nbcalib.report.config import AssessConfig
 from nbcalib.transforms import invert_T, pose_error, se3_exp, validate_T
 
@@ -117,6 +133,13 @@ class Quality:
     pair_hessians_raw : ndarray of shape (K, 6, 6)
         The same Hessians from the gradient differences alone, before that; the per-pair
         optima (Newton steps of the gradient's own quadratic model) use them.
+    trust_region : tuple of 2 floats or None
+        Fine registration's trust region around the start: metres and degrees.
+    start_uncertainty : tuple of 2 floats or None
+        The start's stated uncertainty (metres, degrees; None: not stated).
+    move_allowed : tuple of 2 floats or None
+        The largest move from the start that the start's and the result's uncertainties allow
+        (metres, degrees; module docstring); None without a start.
     config : AssessConfig
     """
 
@@ -141,9 +164,32 @@ class Quality:
         default_factory=lambda: np.zeros(0, dtype=np.int64), repr=False
     )
     pair_hessians_raw: np.ndarray = field(default_factory=lambda: np.zeros((0, 6, 6)), repr=False)
+    trust_region: tuple[float, float] | None = None
+    start_uncertainty: tuple[float, float] | None = None
+    move_allowed: tuple[float, float] | None = None
     verdict: str = "ok"
     reasons: list[str] = field(default_factory=list)
     config: AssessConfig = field(default_factory=AssessConfig, repr=False)
+
+    @property
+    def at_trust_boundary(self) -> bool | None:
+        """The result lies on the edge of the trust region around the start (None: unknown)."""
+        if self.init_change is None or self.trust_region is None:
+            return None
+        return on_trust_boundary(self.init_change, self.trust_region)
+
+    @property
+    def start_uncertainty_used(self) -> tuple[tuple[float, float], str] | None:
+        """The start's uncertainty the verdict takes (metres, degrees) and where it came from.
+
+        The stated one (``"stated"``), else the trust region (``"trust region"``); None when
+        neither is known.
+        """
+        if self.start_uncertainty is not None:
+            return tuple(self.start_uncertainty), "stated"
+        if self.trust_region is not None:
+            return tuple(self.trust_region), "trust region"
+        return None
 
     @property
     def sigma(self) -> np.ndarray:
@@ -182,6 +228,27 @@ class Quality:
                 "translation_m": _finite(self.init_change[0]),
                 "rotation_deg": _finite(self.init_change[1]),
             }
+            move = {
+                "translation_m": _finite(self.init_change[0]),
+                "rotation_deg": _finite(self.init_change[1]),
+            }
+            if self.move_allowed is not None:
+                move["allowed_translation_m"] = _finite(self.move_allowed[0])
+                move["allowed_rotation_deg"] = _finite(self.move_allowed[1])
+            used = self.start_uncertainty_used
+            if used is not None:
+                move["start_uncertainty"] = {
+                    "translation_m": _finite(used[0][0]),
+                    "rotation_deg": _finite(used[0][1]),
+                    "source": used[1],
+                }
+            if self.trust_region is not None:
+                move["trust_region"] = {
+                    "translation_m": _finite(self.trust_region[0]),
+                    "rotation_deg": _finite(self.trust_region[1]),
+                }
+                move["at_trust_boundary"] = bool(self.at_trust_boundary)
+            out["move_from_start"] = move
         if self.pair_offsets is not None:
             out["pair_offsets"] = _finite(self.pair_offsets.tolist())
         return out
@@ -207,6 +274,7 @@ def assess(
     config: RefineConfig | None = None,
     converged: bool | None = None,
     assess_config: AssessConfig | None = None,
+    start_uncertainty: tuple[float, float] | None = None,
 ) -> Quality:
     """Judge a calibration result: NID curves, uncertainty, verdict (module docstring).
 
@@ -219,12 +287,15 @@ def assess(
     T_init : array_like of shape (4, 4), optional
         The initial guess the optimiser started from.
     config : RefineConfig, optional
-        The refinement settings (bins, hidden-point removal); the smooth NID is used whatever
-        the optimiser.
+        The refinement settings (bins, hidden-point removal, the trust region around
+        ``T_init``); the smooth NID is used whatever the optimiser.
     converged : bool, optional
         Whether the optimiser converged (``RefineResult.converged``); False adds a reason.
     assess_config : AssessConfig, optional
         Ranges, steps, scale and verdict limits.
+    start_uncertainty : tuple of 2 floats, optional
+        How far ``T_init`` may be from the truth, metres and degrees, at the report's
+        confidence (default: not stated, the trust region stands in; module docstring).
 
     Returns
     -------
@@ -237,6 +308,10 @@ def assess(
     # few thousand points each, where threads cost more CPU than they save (bench_report_coverage
     # on a loaded 2-core machine: 0.4 s CPU per case serial, 0.8-6.3 s with the parallel kernels)
     rcfg = replace(config or RefineConfig(), optimizer="lbfgs", parallel=False)
+    if start_uncertainty is not None:
+        from nbcalib.products import check_uncertainty
+
+        start_uncertainty = check_uncertainty(start_uncertainty, "the start")
     T = validate_T(np.asarray(T_camera_lidar, dtype=np.float64), "T_camera_lidar")
     steps = np.array([acfg.hessian_translation] * 3 + [math.radians(acfg.hessian_rotation_deg)] * 3)
 
@@ -286,6 +361,8 @@ def assess(
         pair_hessians=np.array(hessians, dtype=np.float64),
         pair_hessians_raw=np.array(raw_hessians, dtype=np.float64),
         pair_remeasured=np.array(remeasured, dtype=np.int64),
+        trust_region=(rcfg.trust_translation, rcfg.trust_rotation_deg),
+        start_uncertainty=start_uncertainty,
     )
     return rejudge(quality, acfg)
 
@@ -306,8 +383,8 @@ def rejudge(quality: Quality, assess_config: AssessConfig) -> Quality:
     Returns
     -------
     Quality
-        A copy with ``covariance``, ``pair_offsets``, ``uncertainty``, ``verdict``, ``reasons``
-        and ``config`` replaced.
+        A copy with ``covariance``, ``pair_offsets``, ``uncertainty``, ``move_allowed``,
+        ``verdict``, ``reasons`` and ``config`` replaced.
     """
     acfg = assess_config
     q = replace(quality, config=acfg, reasons=[])
@@ -341,6 +418,7 @@ def rejudge(quality: Quality, assess_config: AssessConfig) -> Quality:
         f"curvature of the summed NID, weighted by pixels covered, scale {acfg.scale:.4g}"
         + (" + spread of per-pair optima" if n_pairs >= 2 else "")
     )
+    q.move_allowed = _move_allowed(q)
     q.reasons = _reasons(q, n_negative, pair_mahalanobis)
     q.verdict = "suspect" if q.reasons else "ok"
     return q
@@ -495,6 +573,49 @@ def _uncertainty(covariance: np.ndarray, confidence: float) -> dict:
     }
 
 
+def _move_allowed(q: Quality) -> tuple[float, float] | None:
+    """Largest move from the start the two uncertainties allow: ``sqrt(s^2 + u^2)`` each."""
+    used = q.start_uncertainty_used
+    if q.init_change is None or used is None:
+        return None
+    (s_t, s_r), u = used[0], q.uncertainty
+    return (
+        math.hypot(s_t, u["translation_total_cm"] / 100.0),
+        math.hypot(s_r, u["rotation_total_deg"]),
+    )
+
+
+def _move_reasons(q: Quality) -> list[str]:
+    """The trust-region and move-from-the-start reasons (module docstring)."""
+    if q.init_change is None:
+        return []
+    dt, dr = q.init_change
+    reasons = []
+    if q.at_trust_boundary:
+        rt, rr = q.trust_region
+        reasons.append(
+            f"reached the trust region around the start: moved {dt:.3f} m / {dr:.2f} deg "
+            f"(region {rt:g} m / {rr:g} deg); the optimum may lie beyond it"
+        )
+    if q.move_allowed is not None:
+        (at, ar), (stated, source) = q.move_allowed, q.start_uncertainty_used
+        moved, allowed = [], []
+        if dt > at:
+            moved.append(f"{100 * dt:.1f} cm")
+            allowed.append(f"{100 * at:.1f} cm")
+        if dr > ar:
+            moved.append(f"{dr:.2f} deg")
+            allowed.append(f"{ar:.2f} deg")
+        if moved:
+            whose = "stated" if source == "stated" else "none stated: the trust region"
+            reasons.append(
+                f"moved {' and '.join(moved)} from the start, more than the "
+                f"{' and '.join(allowed)} the start's ({whose}, {100 * stated[0]:.1f} cm, "
+                f"{stated[1]:.2f} deg) and the result's uncertainties allow"
+            )
+    return reasons
+
+
 def _reasons(q: Quality, n_negative: int, pair_mahalanobis: list[float]) -> list[str]:
     """One line per reason to distrust the result (empty: ok)."""
     from scipy.stats import chi2
@@ -552,6 +673,7 @@ def _reasons(q: Quality, n_negative: int, pair_mahalanobis: list[float]) -> list
                 f"initial guess and result far apart: {100 * dt:.1f} cm, {dr:.2f} deg (limits "
                 f"{100 * c.max_init_translation:.0f} cm, {c.max_init_rotation_deg:.1f} deg)"
             )
+    reasons += _move_reasons(q)
     if pair_mahalanobis:
         limit = float(chi2.ppf(c.pair_disagreement_quantile, 6))
         bad = [name for name, d2 in zip(q.names, pair_mahalanobis) if d2 > limit]
