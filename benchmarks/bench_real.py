@@ -1,8 +1,8 @@
 """Fine registration on real data as a user runs it (issue 15): three protocols, two start sizes.
 
 Every run is the command line as typed: ``nbcalib preprocess`` once per set (a work directory),
-then per start a copy of it, ``nbcalib calibrate COPY --init X,Y,Z,QX,QY,QZ,QW`` (which also
-judges the result: ``verdict: ok|suspect``) and ``nbcalib evaluate COPY --ground-truth GT``.
+then per start a copy of it, ``nbcalib calibrate COPY --init X,Y,Z,QX,QY,QZ,QW``,
+``nbcalib evaluate COPY --ground-truth GT`` and ``nbcalib report COPY`` (its verdict).
 
 Protocols, on ``../shared/data/real`` (skips with a message when it is absent):
 
@@ -17,7 +17,7 @@ Starts: the reference turned by exactly ``r`` about a seeded random axis and its
 moved by exactly ``t`` in a seeded random direction, for ``(r, t)`` = (1 deg, 5 cm) and
 (2 deg, 10 cm), ``--perturbations`` (5) directions each, the same for every set. A run "ends
 better" when both its final errors are below its start's. Seconds: wall time of ``calibrate``
-(fine registration + quality assessment, numba cache warm).
+(fine registration alone, numba cache warm).
 
 ``--calibrate-args "..."`` passes options to every ``calibrate`` (the ablation levers:
 ``--structure-weight 1``, ``--bins 8``...), ``--preprocess-args "..."`` to every ``preprocess``.
@@ -122,15 +122,15 @@ def sets(data: Path, tmp: Path, args):
         for i in args.shot_images:
             image = kitti / f"{i:010d}" / "image_02.png"
             pre = [
-                *scans,
-                "--images",
-                image,
+                f"--images={image}",
                 f"--image-times={0.1 * i + 0.05:.3f}",
                 "--neighbors",
                 args.neighbors,
                 "--dynamic",
                 *camera,
             ]
+            # the scans are positional, before the work directory
+            pre = [*scans, None, *pre]
             yield "b", f"kitti image {i:02d} + {args.neighbors} scans", pre, kitti / KITTI_CALIB
     if "c" in args.protocols:
         for frames in args.multi:
@@ -151,7 +151,12 @@ def run_set(protocol, name, pre, calib: Path, tmp: Path, args) -> list[dict]:
     if base.exists():
         shutil.rmtree(base)
     t0 = time.perf_counter()
-    nbcalib("preprocess", *pre, *shlex.split(args.preprocess_args), base)
+    if None in pre:  # positional inputs, then the work directory, then options
+        k = pre.index(None)
+        command = [*pre[:k], base, *pre[k + 1 :]]
+    else:
+        command = [base, *pre]
+    nbcalib("preprocess", *command, *shlex.split(args.preprocess_args))
     preprocess_s = time.perf_counter() - t0
     T_ref = read_ground_truth(calib)
     gt = tmp / "ground_truth.json"
@@ -165,7 +170,7 @@ def run_set(protocol, name, pre, calib: Path, tmp: Path, args) -> list[dict]:
             shutil.copytree(base, work)
             init = pose_to_xyz_quat(invert_T(perturb(T_ref, offset)))
             w0 = time.perf_counter()
-            cal = nbcalib(
+            nbcalib(
                 "calibrate",
                 work,
                 f"--init={','.join(f'{x:.12g}' for x in init)}",
@@ -173,7 +178,9 @@ def run_set(protocol, name, pre, calib: Path, tmp: Path, args) -> list[dict]:
             )
             seconds = time.perf_counter() - w0
             ev = json.loads(nbcalib("evaluate", work, "--ground-truth", gt).stdout.splitlines()[-1])
-            log = cal.stdout + cal.stderr
+            # the verdict as a user reads it; exit 3 only with --strict
+            rep = nbcalib("report", work, check=False) if args.verdict else None
+            log = "" if rep is None else rep.stdout + rep.stderr
             verdict = next(
                 (ln.split(":", 1)[1].strip() for ln in log.splitlines() if "verdict:" in ln), "?"
             )
@@ -289,6 +296,9 @@ def parse_args(argv=None):
     ap.add_argument("--calibrate-args", default="", help="options for every calibrate")
     ap.add_argument("--preprocess-args", default="", help="options for every preprocess")
     ap.add_argument("--quick", action="store_true", help="one set per protocol, 2 starts")
+    ap.add_argument(
+        "--no-verdict", dest="verdict", action="store_false", help="skip nbcalib report"
+    )
     ap.add_argument("--threads", type=int, default=None, help="NUMBA_NUM_THREADS of the runs")
     args = ap.parse_args(argv)
     args.sizes = [tuple(float(v) for v in s.split(",")) for s in args.sizes.split(";")]
