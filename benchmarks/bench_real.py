@@ -10,7 +10,8 @@ Protocols, on ``../shared/data/real`` (skips with a message when it is absent):
 - **b** the paper's single-shot: one KITTI image + the K scans around it (``--neighbors``,
   default 10), accumulated by continuous-time ICP and expressed in the LiDAR frame at the image
   time (``--images IMG --image-times T --neighbors K --dynamic``); images 5, 10, 15. KITTI's
-  camera fires when the LiDAR faces forward, the middle of its sweep: ``T = 0.1 i + 0.05`` s;
+  camera fires when the LiDAR faces forward, the middle of its sweep: ``T = 0.1 i + 0.05`` s
+  (``--image-offset`` 0.05; 0 puts the cloud at the start of the image's scan instead);
 - **c** several pairs jointly (``--frames``): KITTI frames 0-4, 5-9, 10-14, 15-19, and all 20.
 
 Starts: the reference turned by exactly ``r`` about a seeded random axis and its camera centre
@@ -123,7 +124,7 @@ def sets(data: Path, tmp: Path, args):
             image = kitti / f"{i:010d}" / "image_02.png"
             pre = [
                 f"--images={image}",
-                f"--image-times={0.1 * i + 0.05:.3f}",
+                f"--image-times={0.1 * i + args.image_offset:.3f}",
                 "--neighbors",
                 args.neighbors,
                 "--dynamic",
@@ -292,6 +293,12 @@ def parse_args(argv=None):
     ap.add_argument("--perturbations", type=int, default=5, help="start directions per size")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--neighbors", type=int, default=10, help="scans per single shot (b)")
+    ap.add_argument(
+        "--image-offset",
+        type=float,
+        default=0.05,
+        help="(b) image time after its scan's start, s (0.05: KITTI's mid-sweep trigger)",
+    )
     ap.add_argument("--sizes", default="1,0.05;2,0.10", help="start sizes 'deg,m;deg,m'")
     ap.add_argument("--calibrate-args", default="", help="options for every calibrate")
     ap.add_argument("--preprocess-args", default="", help="options for every preprocess")
