@@ -185,6 +185,9 @@ def run_set(protocol, name, pre, calib: Path, tmp: Path, args) -> list[dict]:
             verdict = next(
                 (ln.split(":", 1)[1].strip() for ln in log.splitlines() if "verdict:" in ln), "?"
             )
+            reasons = [
+                ln.strip()[2:].split(":")[0] for ln in log.splitlines() if ln.startswith("  - ")
+            ]
             row = {
                 "protocol": protocol,
                 "set": name,
@@ -194,6 +197,7 @@ def run_set(protocol, name, pre, calib: Path, tmp: Path, args) -> list[dict]:
                 "translation_cm": 100 * ev["translation_error_m"],
                 "rotation_deg": ev["rotation_error_deg"],
                 "verdict": verdict,
+                "reasons": reasons,
                 "seconds": seconds,
                 "preprocess_s": preprocess_s,
             }
