@@ -240,13 +240,7 @@ class Bag:
 
         topic = self.select_topic("point cloud", topic)
         source = f"{self.path} {topic}"
-        last = None if only is None else max(only, default=-1)
-        for k, (log_time, msgtype, raw) in enumerate(self.raw_messages(topic)):
-            if only is not None:
-                if k > last:
-                    return
-                if k not in only:
-                    continue
+        for log_time, msgtype, raw in self._chosen_messages(topic, only):
             if msgtype in LIVOX_CUSTOM:
                 stamp, fields = self._livox_fields(raw, msgtype, topic)
                 times = "offset_time" if time_field == "auto" else time_field
@@ -259,6 +253,18 @@ class Bag:
                 fields, intensity_channel=intensity_channel, time_field=times, source=source
             )
             yield (stamp or log_time), cloud
+
+    def _chosen_messages(self, topic: str, only):
+        """``raw_messages(topic)``, only those numbered in ``only`` (0-based) when given."""
+        if only is None:
+            yield from self.raw_messages(topic)
+            return
+        last = max(only, default=-1)
+        for k, message in enumerate(self.raw_messages(topic)):
+            if k > last:
+                return
+            if k in only:
+                yield message
 
     def _livox_fields(self, raw: bytes, msgtype: str, topic: str) -> tuple[int, dict]:
         """Livox CustomMsg -> (stamp_ns, fields), straight from the bytes when possible."""
@@ -291,13 +297,7 @@ class Bag:
         """
         topic = self.select_topic("image", topic)
         source = f"{self.path} {topic}"
-        last = None if only is None else max(only, default=-1)
-        for k, (log_time, msgtype, raw) in enumerate(self.raw_messages(topic)):
-            if only is not None:
-                if k > last:
-                    return
-                if k not in only:
-                    continue
+        for log_time, msgtype, raw in self._chosen_messages(topic, only):
             msg = self._deserialize(raw, msgtype, topic)
             stamp = header_stamp_ns(msg.header) or log_time
             if self.topics[topic] == COMPRESSED_IMAGE:
