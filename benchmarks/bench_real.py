@@ -31,7 +31,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import os
 import platform
 import shlex
@@ -44,8 +43,11 @@ from pathlib import Path
 
 import numpy as np
 
+# the starts of the in-process benchmark: the same seeded directions, exactly sized
+from bench_real_registration import perturb, perturbations
+
 from nbcalib.io.calib_json import read_ground_truth
-from nbcalib.transforms import invert_T, make_T, pose_to_xyz_quat, so3_exp
+from nbcalib.transforms import invert_T, pose_to_xyz_quat
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
 KITTI = "kitti_raw_2011_09_26"
@@ -55,28 +57,6 @@ START_SIZES = ((1.0, 0.05), (2.0, 0.10))
 #: "good" and "bad" results for the verdict figures (issue 15)
 GOOD = (0.3, 0.05)
 BAD = (1.0, 0.10)
-
-
-def perturbations(count: int, seed: int, angle_deg: float, distance: float):
-    """``count`` (rotation, translation) offsets of exactly ``angle_deg`` and ``distance``.
-
-    The same random directions for every size: size k's run j differs only in magnitude.
-    """
-    rng = np.random.default_rng(seed)
-    out = []
-    for _ in range(count):
-        axis, direction = rng.standard_normal(3), rng.standard_normal(3)
-        axis /= np.linalg.norm(axis)
-        direction /= np.linalg.norm(direction)
-        out.append((so3_exp(math.radians(angle_deg) * axis), distance * direction))
-    return out
-
-
-def perturb(T_camera_lidar: np.ndarray, offset) -> np.ndarray:
-    """Turn ``T_lidar_camera`` by ``R`` and move the camera centre by ``t`` (LiDAR frame)."""
-    R, t = offset
-    T_lidar_camera = invert_T(T_camera_lidar)
-    return invert_T(make_T(R @ T_lidar_camera[:3, :3], T_lidar_camera[:3, 3] + t))
 
 
 def nbcalib(*args, check=True) -> subprocess.CompletedProcess:
@@ -164,7 +144,9 @@ def run_set(protocol, name, pre, calib: Path, tmp: Path, args) -> list[dict]:
     gt.write_text(json.dumps({"T_camera_lidar": T_ref.tolist()}))
     runs = []
     for angle, dist in args.sizes:
-        for j, offset in enumerate(perturbations(args.perturbations, args.seed, angle, dist)):
+        for j, offset in enumerate(
+            perturbations(args.perturbations, args.seed, angle_deg=angle, distance=dist)
+        ):
             work = tmp / "run"
             if work.exists():
                 shutil.rmtree(work)
