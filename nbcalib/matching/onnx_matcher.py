@@ -9,6 +9,11 @@ Each learned matcher is two ONNX graphs in its own folder of the model directory
                                         -> log_assignment (1, M + 1, N + 1)
     <model dir>/<name>/model.json       how the graphs were made and how to feed them
 
+XFeat + LighterGlue also ships inside the package (``nbcalib/models/xfeat-lighterglue``, with
+its licence, attribution and ``SHA256SUMS``), so a plain ``pip install`` matches with it: no
+torch, no export, no download. A matcher exported into the model directory is used before the
+shipped one (:func:`find_model`).
+
 The extractor returns a fixed number ``K`` of candidates (an export-friendly top-k over the
 suppressed score map); a candidate is a keypoint when its score is above the detection
 threshold, which therefore stays a run-time option. The matcher returns LightGlue's log
@@ -41,7 +46,9 @@ __all__ = [
     "default_model_dir",
     "exported_matchers",
     "filter_matches",
+    "find_model",
     "model_dir",
+    "packaged_model_dir",
 ]
 
 #: Environment variable that overrides the default model directory.
@@ -150,14 +157,49 @@ def model_dir(path: str | os.PathLike | None = None) -> Path:
     return Path(env) if env else default_model_dir()
 
 
+def packaged_model_dir() -> Path:
+    """The matchers shipped inside the package (``nbcalib/models``)."""
+    return Path(__file__).resolve().parent.parent / "models"
+
+
+#: The files of one matcher's folder.
+MODEL_FILES = ("extractor.onnx", "matcher.onnx", MANIFEST)
+
+#: Checksums of a shipped matcher's files (``sha256sum`` format).
+CHECKSUMS = "SHA256SUMS"
+
+
+def find_model(name: str, directory: str | os.PathLike | None = None) -> Path | None:
+    """The folder of matcher ``name``: in the model directory, else shipped; None if neither."""
+    for root in (model_dir(directory), packaged_model_dir()):
+        if all((root / name / f).is_file() for f in MODEL_FILES):
+            return root / name
+    return None
+
+
 def exported_matchers(directory: str | os.PathLike | None = None) -> list[str]:
-    """Names of the learned matchers whose graphs are in the model directory (best first)."""
-    root = model_dir(directory)
-    return [
-        name
-        for name in LEARNED_MATCHERS
-        if all((root / name / f).is_file() for f in ("extractor.onnx", "matcher.onnx", MANIFEST))
-    ]
+    """Names of the learned matchers available (exported or shipped), best first."""
+    return [name for name in LEARNED_MATCHERS if find_model(name, directory) is not None]
+
+
+def _verify_checksums(folder: Path) -> None:
+    """Check a shipped matcher's files against its ``SHA256SUMS`` (corrupt install: InputError)."""
+    import hashlib
+
+    sums = folder / CHECKSUMS
+    if not sums.is_file():
+        return
+    for line in sums.read_text().splitlines():
+        digest, _, filename = line.partition("  ")
+        path = folder / filename.strip()
+        try:
+            actual = hashlib.sha256(path.read_bytes()).hexdigest()
+        except OSError as exc:
+            raise InputError(f"unreadable model file ({exc})", path) from None
+        if actual != digest:
+            raise InputError(
+                "checksum mismatch: the shipped model is corrupt; reinstall nbcalib", path
+            )
 
 
 @dataclass(frozen=True)
@@ -243,14 +285,18 @@ class OnnxMatcher:
         ort = require("onnxruntime", "matching")
         self.name = name
         self.spec = LEARNED_MATCHERS[name]
-        self.path = model_dir(directory) / name
-        manifest_path = self.path / MANIFEST
-        if not manifest_path.is_file():
+        found = find_model(name, directory)
+        if found is None:
             raise InputError(
                 f"learned matcher {name!r} is not exported; run 'nbcalib models export "
-                f'--models {name}\' (needs torch: pip install "nbcalib[export]")',
-                self.path,
+                f"--models {name}' (needs torch: nbcalib models --help says how to install it)",
+                model_dir(directory) / name,
             )
+        self.path = found
+        self.packaged = found.parent == packaged_model_dir()
+        if self.packaged:
+            _verify_checksums(found)
+        manifest_path = self.path / MANIFEST
         try:
             self.manifest = json.loads(manifest_path.read_text())
         except (OSError, ValueError) as exc:
