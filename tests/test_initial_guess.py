@@ -135,6 +135,29 @@ def test_wrong_matches_that_pass_the_inlier_count_are_not_distinct():
     assert good.success and good.failure == "" and good.distinctiveness > 3.0
 
 
+def test_a_pose_that_only_re_explains_the_answers_inliers_is_no_rival():
+    """Half the correct matches sit near the principal point, which a roll about the optical
+    axis hardly moves: poses rolled 5+ degrees explain them too. Counted over all
+    correspondences that made the good guess "not distinct"; only the answer's outliers may
+    support a rival, and they support none."""
+    rng = np.random.default_rng(3)
+    camera = example_camera("pinhole", 640, 480)
+    truth = default_T_camera_lidar("spinning", 2)
+    centre = rng.uniform([-30, -30], [30, 30], (250, 2)) + np.array([319.5, 239.5])
+    spread = rng.uniform([0, 0], [639, 479], (150, 2))
+    uv = np.vstack([centre, spread])
+    depth = rng.uniform(5, 40, len(uv))
+    points = transform_points(invert_T(truth), camera.unproject(uv) * depth[:, None])
+    uv_noisy = uv + rng.normal(scale=0.5, size=uv.shape)
+    wrong_uv = rng.uniform([0, 0], [639, 479], (200, 2))
+    wrong_points = rng.uniform([-20, -10, 2], [20, 10, 40], (200, 3))
+    guess = estimate_initial_guess(
+        camera, np.vstack([uv_noisy, wrong_uv]), np.vstack([points, wrong_points]), seed=1
+    )
+    _assert_success(guess, truth)
+    assert guess.runner_up < guess.support / 4
+
+
 def test_points_behind_the_camera_count_as_outliers():
     camera = example_camera("plumb_bob", 640, 480)
     truth = _camera_looking(0.0)
