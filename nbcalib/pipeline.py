@@ -183,16 +183,19 @@ class Calibrator:
 
     def _use_fallback(self, exc: InputError) -> None:
         """The automatic guess failed: record it, and start from the fallback pose instead."""
+        # the guess's own reason when there is one (the error adds what to do next)
+        failed = self.guess is not None and not self.guess.success
+        reason = self.guess.failure if failed else str(exc)
         log.warning(
             "automatic initial guess failed (%s): calibrating from %s instead",
-            exc,
+            reason,
             self._fallback.source,
         )
         self._guess_failed = True
         self._forget_after("initial-guess")
         calib = self._calib()
         if calib is not None:
-            calib.nbcalib.setdefault("initial_guess", {})["failed"] = str(exc)
+            calib.nbcalib.setdefault("initial_guess", {})["failed"] = reason
         self._remember("initial-guess", calib)
 
     def _run_stage(self, stage: str) -> None:
@@ -317,9 +320,30 @@ class Calibrator:
         )
         self.guess, self._guess_corr = guess, corr
         _detail(guess.summary())
+        source = f"hand-picked correspondences ({self._manual})" if manual else self._matchers()
         if not guess.success and not self._accept_failed_guess:
-            hint = "--force writes it anyway" if manual else "pick correspondences with --manual"
-            raise InputError(f"initial guess not written: {guess.failure} ({hint})", where)
+            if manual:
+                raise InputError(
+                    f"initial guess not written: {guess.failure} (--force writes it anyway)", where
+                )
+            raise InputError(
+                f"initial guess not written: {guess.failure}; the {source} found no pose the "
+                "camera and the LiDAR agree on (see *_matches.png). Next: a rough extrinsic "
+                "with --init X,Y,Z,QX,QY,QZ,QW [--init-uncertainty M DEG], hand-picked "
+                "correspondences with --manual FILE, or a rough orientation for matching with "
+                "--prior X,Y,Z,QX,QY,QZ,QW",
+                where,
+            )
+        log.info(
+            "    initial guess from %s: %d of %d correspondences agree (RMS %.2f px), %.1fx "
+            "the best other rotation: %s",
+            source,
+            guess.n_inliers,
+            guess.n_correspondences,
+            guess.rms_px,
+            guess.distinctiveness,
+            "looks right" if guess.success else "FAILED its test, kept as asked",
+        )
         self.start = Start.from_matrix(guess.T_camera_lidar, stage)
         self._forget_after("initial-guess")
         calib = self._calib()
@@ -336,6 +360,7 @@ class Calibrator:
                 "seed": self.config.seed,
                 "confidence_weights": bool(cfg.confidence_weights and corr.confidence is not None),
                 "source": str(self._manual) if manual else "matches",
+                "matcher": None if manual else self._matchers().removesuffix(" matches"),
             }
         self._remember("initial-guess", calib)
 
@@ -560,6 +585,19 @@ class Calibrator:
         where = self.work.path if self.work is not None else None
         self._guess_parts = parts
         return pool_correspondences(parts), AUTO_STAGE, where
+
+    def _matchers(self) -> str:
+        """Which matcher made the correspondences, for messages ("xfeat-lighterglue matches")."""
+        names = {m.matcher for m in self.matches.values()} if self.matches else set()
+        if not names and self.work is not None:
+            for pair in self._pairs():
+                try:
+                    doc = json.loads(self.work.correspondences_path(pair.name).read_text())
+                except (OSError, ValueError):
+                    continue
+                if isinstance(doc, dict) and isinstance(doc.get("matcher"), str):
+                    names.add(doc["matcher"])
+        return f"{' + '.join(sorted(names)) or 'keypoint'} matches"
 
     def _start_pose(self, *, required: bool = True) -> Start | None:
         """Where fine registration starts (or started), in this order of precedence.

@@ -97,6 +97,32 @@ def test_run_falls_back_to_init_and_says_so(finished):
     assert calib.nbcalib["initial_guess"]["failed"]
 
 
+def test_a_failed_automatic_guess_says_what_to_do_next(inputs, tmp_path, capsys):
+    """No --init: the failed guess stops the run with exit 2, names the matcher and the three
+    ways on (--init, --manual, --prior), and writes no guess."""
+    work = tmp_path / "work"
+    args = [a for a in _args(inputs, work) if a != INIT]
+    assert main(args) == 2
+    err = capsys.readouterr().err
+    assert "initial guess not written" in err and "the sift matches" in err
+    for way in ("--init X,Y,Z,QX,QY,QZ,QW", "--manual FILE", "--prior"):
+        assert way in err, way
+    # the progress log goes to stderr too; the error is one line, the last
+    assert "Traceback" not in err
+    assert err.strip().splitlines()[-1].startswith("nbcalib run: error:")
+    assert "initial guess not written" in err.strip().splitlines()[-1]
+    calib = read_calib_json(work / "calib.json")
+    assert not calib.has_result("init_T_lidar_camera_auto")
+    assert not calib.has_result("T_lidar_camera")
+
+
+def test_run_says_where_its_start_came_from(finished, capsys):
+    """The summary of a resumed run names the start: --init, after the automatic guess failed."""
+    assert main(["run", str(finished)]) == 0
+    out = capsys.readouterr().out
+    assert "started from: --init (the automatic initial guess failed: fewer than 1000" in out
+
+
 def test_run_resumes_without_redoing_finished_stages(finished, tmp_path, caplog, capsys):
     work = _copy(finished, tmp_path)
     before = (work / "calib.json").read_text()

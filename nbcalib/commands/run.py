@@ -244,7 +244,24 @@ def _summary(calibrator) -> None:
     values = ", ".join(f"{v:.6f}" for v in calib.results[FINAL_STAGE])
     ran = ", ".join(calibrator.ran) or "nothing (every stage was done)"
     print(f"T_lidar_camera = [{values}]  (x y z qx qy qz qw)")
+    print(f"started from: {_start_origin(calib)}")
     if calibrator.seconds:
         times = ", ".join(f"{s} {t:.1f} s" for s, t in calibrator.seconds.items())
         print(f"time: {times}")
     print(f"nbcalib run: ran {ran}; result in {calibrator.work.calib_path}")
+
+
+def _start_origin(calib) -> str:
+    """Where fine registration's start came from, in words, from ``calib.json``."""
+    from nbcalib.io.calib_json import AUTO_STAGE, MANUAL_STAGE
+
+    start = str((calib.nbcalib.get("calibration") or {}).get("start", "unknown"))
+    guess = calib.nbcalib.get("initial_guess") or {}
+    if start == AUTO_STAGE:
+        matcher = (guess.get(AUTO_STAGE) or {}).get("matcher") or "keypoint"
+        return f"the automatic initial guess ({matcher} matches)"
+    if start == MANUAL_STAGE:
+        return "the initial guess from hand-picked correspondences"
+    if guess.get("failed"):
+        return f"{start} (the automatic initial guess failed: {guess['failed']})"
+    return start
