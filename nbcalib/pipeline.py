@@ -356,6 +356,7 @@ class Calibrator:
                 "rms_px": None if not np.isfinite(guess.rms_px) else round(guess.rms_px, 4),
                 "support": guess.support,
                 "runner_up": guess.runner_up,
+                "runner_up_shared": guess.runner_up_shared,
                 "success": bool(guess.success),
                 "seed": self.config.seed,
                 "confidence_weights": bool(cfg.confidence_weights and corr.confidence is not None),

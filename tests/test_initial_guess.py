@@ -158,6 +158,22 @@ def test_a_pose_that_only_re_explains_the_answers_inliers_is_no_rival():
     assert guess.runner_up < guess.support / 4
 
 
+def test_a_rival_that_explains_nearly_as_much_in_all_fails_the_guess():
+    """Both counts must leave the answer ahead: its own evidence 2x, all evidence 1.5x."""
+    from dataclasses import replace
+
+    camera = example_camera("pinhole", 640, 480)
+    truth = default_T_camera_lidar("spinning", 7)
+    c = synthetic_correspondences(camera, truth, 3, n_inliers=60, outlier_fraction=0.8)
+    good = estimate_initial_guess(camera, c.uv_camera, c.points_lidar, ransac_iterations=2000)
+    assert good.success and good.min_shared_distinctiveness == 1.5
+    assert good.support >= 1.5 * max(good.runner_up_shared, 1)
+    # a real-frame case: 27 inliers, a rival with 12 of the rest but 21 in all (153 deg off)
+    close = replace(good, support=27, runner_up=12, runner_up_shared=21)
+    assert close.failure.startswith("not distinct") and "21 correspondences" in close.failure
+    assert replace(close, runner_up_shared=18).failure == ""
+
+
 def test_points_behind_the_camera_count_as_outliers():
     camera = example_camera("plumb_bob", 640, 480)
     truth = _camera_looking(0.0)

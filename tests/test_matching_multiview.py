@@ -293,3 +293,78 @@ def test_find_matches_views_then_initial_guess_on_a_work_directory(tmp_path, mon
     e = pose_errors(wd.read_calib().get_T_camera_lidar(AUTO_STAGE), truth)
     assert e["rotation_error_deg"] < TOL["multiview_self_consistent_deg"]["atol"]
     assert e["translation_error_m"] < TOL["multiview_self_consistent_m"]["atol"]
+
+
+def test_inpaint_coverage_fills_the_gaps_between_rings_and_nothing_outside():
+    from nbcalib.matching.views import inpaint_coverage
+
+    image = np.zeros((60, 80), np.uint8)
+    image[20:50:4, 10:70] = 200  # rings every 4 rows: gaps of 3 rows between them
+    image[22, 30] = 0  # and a hole in a ring
+    out = inpaint_coverage(image, 5)
+    inside = np.zeros_like(image, bool)
+    inside[20:49, 10:70] = True  # first ring (row 20) to last (row 48)
+    assert np.all(out[inside] >= 1), "every gap of the coverage is filled"
+    assert np.all(out[inside] > 100), "with values of the rings around it"
+    assert np.all(out[:20] == 0) and np.all(out[49:] == 0), "no sky, no ground below"
+    assert np.all(out[:, :10] == 0) and np.all(out[:, 70:] == 0)
+    assert np.array_equal(out[image > 0], image[image > 0]), "shown pixels unchanged"
+    # a gap wider than the width stays empty
+    wide = np.zeros((40, 40), np.uint8)
+    wide[10, :] = wide[30, :] = 90
+    assert np.all(inpaint_coverage(wide, 5)[15:26] == 0)
+    with pytest.raises(ValueError, match="width"):
+        inpaint_coverage(image, 0)
+
+
+def test_render_view_inpaint_keeps_the_index_map_unfilled(rng):
+    points, intensities = _cylinder(rng, n=20_000)
+    camera = example_camera("plumb_bob", 640, 480)
+    R = heading_rotations(4)[1]
+    plain = render_view(camera, R, points, intensities, scale=0.5, fill_radius=1)
+    painted = render_view(camera, R, points, intensities, scale=0.5, fill_radius=1, inpaint=9)
+    assert painted.fill_fraction > plain.fill_fraction
+    np.testing.assert_array_equal(painted.index, plain.index)
+    shown = plain.intensity > 0
+    np.testing.assert_array_equal(painted.intensity[shown], plain.intensity[shown])
+
+
+def test_find_correspondences_retries_finer_inpainted_views_until_a_guess_passes(monkeypatch, rng):
+    """The first attempt's matches are wrong, the second's right: the second is kept, and the
+    attempts are recorded; no retries without retry_pixels_per_degree."""
+    from nbcalib.matching import find as find_module
+    from nbcalib.matching import multiview
+    from nbcalib.matching.config import MatchConfig
+    from nbcalib.products import PairData
+
+    camera = example_camera("pinhole", 640, 480)
+    truth = default_T_camera_lidar("spinning", 1)
+    uv = rng.uniform([0, 0], [639, 479], (200, 2))
+    depth = rng.uniform(3, 30, len(uv))
+    points = transform_points(np.linalg.inv(truth), camera.unproject(uv) * depth[:, None])
+    good = Correspondences(uv, points, uv, np.arange(200), np.zeros(200, int), ("p",), 200)
+    bad_uv = rng.uniform([0, 0], [639, 479], (200, 2))
+    bad = Correspondences(bad_uv, points, bad_uv, np.arange(200), np.zeros(200, int), ("p",), 200)
+    seen = []
+
+    def fake_match_views(camera, image, pts, values, cfg, **kwargs):
+        seen.append((cfg.pixels_per_degree, cfg.inpaint_deg))
+        corr = bad if len(seen) == 1 else good
+        return multiview.MultiViewMatches([], -1, (), corr, 0.0)
+
+    monkeypatch.setattr(multiview, "match_views", fake_match_views)
+    from nbcalib.preprocess.lidar_image import LidarImage
+
+    index = np.full((10, 20), -1, np.int32)
+    lidar = LidarImage(np.zeros((10, 20), np.uint8), index, None)
+    pair = PairData("p", np.zeros((480, 640), np.uint8), points, np.zeros(200), lidar)
+    cfg = MatchConfig(matcher="sift", retry_pixels_per_degree=(10.0, 15.0), retry_inpaint_deg=2.0)
+    found = find_module.find_correspondences(camera, pair, cfg)
+    assert seen == [(None, 0.0), (10.0, 2.0)], "stops at the first attempt that passes"
+    assert found.kept_attempt == 1 and found.correspondences is good
+    assert [a["guess_ok"] for a in found.attempts] == [False, True]
+    seen.clear()
+    found = find_module.find_correspondences(
+        camera, pair, MatchConfig(matcher="sift", retry_pixels_per_degree=())
+    )
+    assert seen == [(None, 0.0)] and found.kept_attempt == 0

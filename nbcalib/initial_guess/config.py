@@ -42,7 +42,13 @@ class InitialGuessConfig:
         The same for hand-picked correspondences.
     min_distinctiveness : float
         How many times more correspondences the final pose must explain than the best pose
-        rotated more than 5 degrees from it, for success (0: no such test).
+        rotated more than 5 degrees from it explains among those the final pose leaves out,
+        for success (0: no such test).
+    min_shared_distinctiveness : float
+        The same against what that rival explains among all correspondences, the final pose's
+        inliers included (0: no such test). Wrong matches on real frames passed the first
+        test alone (27 against 12, a guess 153 degrees off) but not this one (27 against 20);
+        correct guesses had 1.7-3.3x (docs/BENCHMARKS.md, "Initial guess on real data").
     candidates : int
         RANSAC rotations refined by LM (near-field parallax, which rotation-only RANSAC
         ignores, can make the true rotation only the second or third best).
@@ -72,6 +78,7 @@ class InitialGuessConfig:
     min_inliers: int = 10
     min_manual_inliers: int = 3
     min_distinctiveness: float = 2.0
+    min_shared_distinctiveness: float = 1.5
     candidates: int = 8
     local_optimization: bool = True
     initial_translation: str = "bearing"
@@ -97,8 +104,10 @@ class InitialGuessConfig:
         ):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name} must be an integer >= 1, got {getattr(self, name)}")
-        if not (math.isfinite(self.min_distinctiveness) and self.min_distinctiveness >= 0):
-            raise ValueError(f"min_distinctiveness must be >= 0, got {self.min_distinctiveness}")
+        for name in ("min_distinctiveness", "min_shared_distinctiveness"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be >= 0, got {value}")
         if not self.max_initial_translation >= 0:
             raise ValueError(
                 f"max_initial_translation must be >= 0, got {self.max_initial_translation}"

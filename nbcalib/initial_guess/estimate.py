@@ -128,6 +128,11 @@ class InitialGuess:
         answer the data offer.
     min_distinctiveness : float
         ``support / runner_up`` needed for ``success``.
+    runner_up_shared : int
+        The same rival poses' most correspondences among *all* of them (the answer's inliers
+        included).
+    min_shared_distinctiveness : float
+        ``support / runner_up_shared`` needed for ``success``.
     """
 
     T_camera_lidar: np.ndarray
@@ -144,6 +149,8 @@ class InitialGuess:
     support: int = 0
     runner_up: int = 0
     min_distinctiveness: float = 0.0
+    runner_up_shared: int = 0
+    min_shared_distinctiveness: float = 0.0
 
     @property
     def distinctiveness(self) -> float:
@@ -155,6 +162,12 @@ class InitialGuess:
         """Why ``success`` is False ("" when it is True)."""
         if self.n_inliers < self.min_inliers:
             return f"fewer than {self.min_inliers} inliers"
+        if self.support < self.min_shared_distinctiveness * max(self.runner_up_shared, 1):
+            return (
+                f"not distinct: a pose rotated {DISTINCT_ROTATION_DEG:g}+ deg away explains "
+                f"{self.runner_up_shared} correspondences, this one {self.support} "
+                f"(need {self.min_shared_distinctiveness:g}x)"
+            )
         if self.distinctiveness < self.min_distinctiveness:
             return (
                 f"not distinct: a pose rotated {DISTINCT_ROTATION_DEG:g}+ deg away explains "
@@ -520,23 +533,23 @@ def estimate_initial_guess(
     rms = float(np.sqrt(np.mean(errors[inliers] ** 2))) if n_inliers else math.nan
     R_final = T_final[:3, :3]
     support = n_inliers
-    runner_up = 0
-    if cfg.min_distinctiveness > 0:
-        # a different answer needs evidence of its own: only correspondences the final pose
-        # does not explain can support it
-        free = ~inliers[usable]
-        runner_up = _runner_up(
+    runner_up = runner_up_shared = 0
+    if cfg.min_distinctiveness > 0 or cfg.min_shared_distinctiveness > 0:
+        runner_up, runner_up_shared = _runner_up(
             camera,
             ransac,
             R_final,
-            uv_u[free],
-            points_u[free],
-            bearings_u[free],
+            uv_u,
+            points_u,
+            bearings_u,
+            ~inliers[usable],
             threshold=ransac_threshold,
             seed=seed,
             iterations=cfg.translation_iterations,
         )
-    distinct = support >= cfg.min_distinctiveness * max(runner_up, 1)
+    distinct = support >= cfg.min_distinctiveness * max(runner_up, 1) and (
+        support >= cfg.min_shared_distinctiveness * max(runner_up_shared, 1)
+    )
     return InitialGuess(
         T_camera_lidar=T_final,
         inliers=inliers,
@@ -552,6 +565,8 @@ def estimate_initial_guess(
         support=support,
         runner_up=runner_up,
         min_distinctiveness=float(cfg.min_distinctiveness),
+        runner_up_shared=runner_up_shared,
+        min_shared_distinctiveness=float(cfg.min_shared_distinctiveness),
     )
 
 
@@ -566,28 +581,43 @@ def _runner_up(
     uv,
     points,
     bearings,
+    free,
     *,
     threshold,
     seed,
     iterations,
-) -> int:
-    """Most of ``uv`` a pose rotated more than ``DISTINCT_ROTATION_DEG`` away explains.
+) -> tuple[int, int]:
+    """Most correspondences a pose rotated more than ``DISTINCT_ROTATION_DEG`` away explains.
 
-    ``uv, points, bearings`` are the correspondences the final pose leaves unexplained. The best
-    :data:`_RUNNER_UP_CANDIDATES` RANSAC rotations that far away (and at least 1 degree from
-    each other) each get the translation that explains most of them
-    (:func:`translation_ransac`); their full-pose inlier counts are compared, in the same
-    measure as the final pose's inliers.
+    The best :data:`_RUNNER_UP_CANDIDATES` RANSAC rotations that far away (and at least
+    1 degree from each other) each get the translation that explains most correspondences
+    (:func:`translation_ransac`), in the same full-pose measure as the final pose's inliers:
+    once among the correspondences ``free`` (those the final pose leaves unexplained, the
+    rival's own evidence) and once among all of them (evidence shared with the answer counted
+    too). Returns the two maxima, (own, shared).
     """
-    if len(uv) < 2:
-        return len(uv)
     others = ransac.ranked_hypotheses(
         _RUNNER_UP_CANDIDATES, min_inliers=1, away_from=R_final, away_deg=DISTINCT_ROTATION_DEG
     )
-    best = 0
+    own = shared = 0
+    n_free = int(np.count_nonzero(free))
     for _, _, R in others:
         _, n = translation_ransac(
             camera, R, uv, points, bearings, threshold=threshold, iterations=iterations, seed=seed
         )
-        best = max(best, n)
-    return best
+        shared = max(shared, n)
+        if n_free >= 2:
+            _, n = translation_ransac(
+                camera,
+                R,
+                uv[free],
+                points[free],
+                bearings[free],
+                threshold=threshold,
+                iterations=iterations,
+                seed=seed,
+            )
+        else:
+            n = n_free
+        own = max(own, n)
+    return own, shared

@@ -75,6 +75,20 @@ class MatchConfig:
         Range-dependent splat of the views (0: off; :func:`~nbcalib.matching.views.render_view`).
     median : int
         Median filter of the view intensities, pixels (0: off).
+    inpaint_deg : float
+        Inpaint the holes of each view's LiDAR coverage up to this wide, degrees (0: off;
+        :func:`~nbcalib.matching.views.inpaint_coverage`).
+    retry_pixels_per_degree : tuple of float
+        When a pair's views give no initial guess that passes its success test, match them
+        again at each of these resolutions in turn (pixels per degree, never above the
+        camera's), with the LiDAR coverage inpainted (``retry_inpaint_deg``), until one does;
+        the attempt with the best guess is kept (:func:`~nbcalib.matching.find.
+        find_correspondences`). () : no retries. Real scans are sparse rings that the learned
+        matchers do not match to a photograph until the gaps are filled and the view is
+        finer than the LiDAR's own resolution (docs/BENCHMARKS.md, "Initial guess on real
+        data").
+    retry_inpaint_deg : float
+        ``inpaint_deg`` of the retries.
     search_radius : float
         A LiDAR keypoint on an empty pixel takes the nearest LiDAR point within this radius,
         pixels (raised to ``fill_radius`` for the views, whose holes are filled).
@@ -113,6 +127,9 @@ class MatchConfig:
     min_fill: float = 0.05
     splat_pixels_at_1m: float = 0.0
     median: int = 0
+    inpaint_deg: float = 0.0
+    retry_pixels_per_degree: tuple[float, ...] = (10.0, 15.0)
+    retry_inpaint_deg: float = 2.0
     search_radius: float = 2.0
     view_ransac_iterations: int = 2048
     pool: bool = True
@@ -125,6 +142,12 @@ class MatchConfig:
         object.__setattr__(
             self, "prior_yaw_offsets_deg", tuple(float(v) for v in self.prior_yaw_offsets_deg)
         )
+        object.__setattr__(
+            self, "retry_pixels_per_degree", tuple(float(v) for v in self.retry_pixels_per_degree)
+        )
+        for value in self.retry_pixels_per_degree:
+            if not (math.isfinite(value) and value > 0):
+                raise ValueError(f"retry_pixels_per_degree must hold numbers > 0, got {value}")
         if self.matcher not in MATCHER_CHOICES:
             raise ValueError(
                 f"matcher must be one of {', '.join(MATCHER_CHOICES)}, got {self.matcher!r}"
@@ -161,6 +184,10 @@ class MatchConfig:
             raise ValueError(f"sift_ratio must be in (0, 1], got {self.sift_ratio}")
         if self.view_ransac_iterations < 1 or self.min_pool_support < 1:
             raise ValueError("view_ransac_iterations and min_pool_support must be >= 1")
+        for name in ("inpaint_deg", "retry_inpaint_deg"):
+            value = getattr(self, name)
+            if not (math.isfinite(value) and value >= 0):
+                raise ValueError(f"{name} must be a finite number >= 0, got {value}")
         if self.pixels_per_degree is not None and not self.pixels_per_degree > 0:
             raise ValueError(f"pixels_per_degree must be > 0, got {self.pixels_per_degree}")
         if self.threads is not None and self.threads < 1:

@@ -21,7 +21,7 @@ from __future__ import annotations
 
 import os
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -52,6 +52,11 @@ class PairMatches:
         The per-view record with ``views > 0``.
     seconds : float
         Wall time.
+    attempts : tuple of dict
+        With views: each attempt's resolution, inpainting, correspondences and whether their
+        guess passed (``MatchConfig.retry_pixels_per_degree``).
+    kept_attempt : int or None
+        The attempt whose correspondences were kept.
     """
 
     name: str
@@ -60,6 +65,8 @@ class PairMatches:
     matcher: str
     views: object = None
     seconds: float = 0.0
+    attempts: tuple = ()
+    kept_attempt: int | None = None
 
     def summary(self) -> str:
         """One line: what was matched and kept."""
@@ -69,10 +76,20 @@ class PairMatches:
             best = mv.views[mv.best] if mv.best >= 0 else None
             heading = "n/a" if best is None else f"{best.view.heading_deg:.0f} deg"
             inliers = 0 if best is None else best.ransac_inliers
+            retried = ""
+            if len(self.attempts) > 1 and self.kept_attempt is not None:
+                kept = self.attempts[self.kept_attempt]
+                if self.kept_attempt:
+                    retried = (
+                        f", retry {self.kept_attempt}: {kept['pixels_per_degree']:g} px/deg, "
+                        f"inpainted {kept['inpaint_deg']:g} deg"
+                    )
+                else:
+                    retried = f", first of {len(self.attempts)} attempts"
             return (
                 f"{self.name}: {len(mv.views)} views, best heading {heading} (RANSAC inliers "
                 f"{inliers}), {len(corr)} correspondences kept ({self.matcher}, "
-                f"{self.seconds:.1f} s)"
+                f"{self.seconds:.1f} s{retried})"
             )
         return (
             f"{self.name}: {corr.n_matches} matches, {len(corr)} lifted to 3-D points "
@@ -172,23 +189,48 @@ def find_correspondences(
     t0 = time.perf_counter()
     matcher = resolve_matcher(cfg.matcher, model_dir)
     views = None
+    attempts = []
     if cfg.views > 0 or T_camera_lidar_prior is not None:
-        views = match_views(
-            camera,
-            pair.image,
-            pair.points_lidar,
-            pair.intensities,
-            cfg,
-            matcher=matcher,
-            guess_config=guess_config,
-            T_camera_lidar_prior=T_camera_lidar_prior,
-            seed=seed,
-            name=pair.name,
-            model_dir=model_dir,
-        )
+        # the views as configured, then finer inpainted ones until a guess passes its test
+        settings = [cfg] + [
+            replace(cfg, pixels_per_degree=ppd, inpaint_deg=cfg.retry_inpaint_deg)
+            for ppd in cfg.retry_pixels_per_degree
+        ]
+        best = None
+        for attempt in settings:
+            found = match_views(
+                camera,
+                pair.image,
+                pair.points_lidar,
+                pair.intensities,
+                attempt,
+                matcher=matcher,
+                guess_config=guess_config,
+                T_camera_lidar_prior=T_camera_lidar_prior,
+                seed=seed,
+                name=pair.name,
+                model_dir=model_dir,
+            )
+            ok, support = _guess_passes(camera, found.correspondences, guess_config, seed)
+            attempts.append(
+                {
+                    "pixels_per_degree": attempt.pixels_per_degree,
+                    "inpaint_deg": attempt.inpaint_deg,
+                    "correspondences": len(found.correspondences),
+                    "guess_ok": ok,
+                    "support": support,
+                }
+            )
+            if best is None or (ok, support) > best[0]:
+                best = ((ok, support), len(attempts) - 1, found)
+            if ok:
+                break
+        _, kept, views = best
         corr = views.correspondences
         info = {
             "mode": "views",
+            "attempts": attempts,
+            "kept_attempt": kept,
             "views": [
                 {
                     "heading_deg": round(v.view.heading_deg, 2),
@@ -220,4 +262,25 @@ def find_correspondences(
     seconds = time.perf_counter() - t0
     info["seconds"] = round(seconds, 3)
     matches = reference_matches(corr, pair.lidar_index, matcher=matcher, info=info)
-    return PairMatches(pair.name, corr, matches, matcher, views, seconds)
+    return PairMatches(
+        pair.name, corr, matches, matcher, views, seconds, tuple(attempts), info.get("kept_attempt")
+    )
+
+
+def _guess_passes(camera, corr: Correspondences, guess_config, seed: int) -> tuple[bool, int]:
+    """(passes the success test, support) of the initial guess from one pair's matches."""
+    from nbcalib.initial_guess.config import InitialGuessConfig
+    from nbcalib.initial_guess.estimate import MIN_CORRESPONDENCES, estimate_initial_guess
+
+    cfg = guess_config or InitialGuessConfig()
+    if len(corr) < MIN_CORRESPONDENCES:
+        return False, 0
+    guess = estimate_initial_guess(
+        camera,
+        corr.uv_camera,
+        corr.points_lidar,
+        cfg,
+        seed=seed,
+        weights=corr.weights if cfg.confidence_weights else None,
+    )
+    return bool(guess.success), int(guess.support)

@@ -25,6 +25,7 @@ estimate_initial_guess`.
 
 from __future__ import annotations
 
+import math
 import os
 import time
 from dataclasses import dataclass, replace
@@ -214,7 +215,7 @@ def match_views(
     -------
     MultiViewMatches
     """
-    from nbcalib.matching.match import resolve_matcher
+    from nbcalib.matching.match import pixels_per_radian, resolve_matcher
     from nbcalib.matching.views import (
         DEFAULT_PIXELS_PER_DEGREE,
         heading_rotations,
@@ -245,6 +246,11 @@ def match_views(
     search_radius = max(float(cfg.search_radius), float(cfg.fill_radius))
     ppd = cfg.pixels_per_degree or DEFAULT_PIXELS_PER_DEGREE
     scale = view_scale(camera, ppd)
+    # the coverage gaps to inpaint, in view pixels (odd); the views have min(ppd, camera's)
+    view_ppd = pixels_per_radian(camera) * scale * math.pi / 180.0
+    inpaint = 2 * round(cfg.inpaint_deg * view_ppd / 2) + 1 if cfg.inpaint_deg > 0 else 0
+    if inpaint:
+        search_radius = max(search_radius, inpaint / 2)
     translations = None
     if T_camera_lidar_prior is not None:
         T_prior = np.asarray(T_camera_lidar_prior, dtype=np.float64)
@@ -267,6 +273,7 @@ def match_views(
             fill_radius=cfg.fill_radius,
             splat_pixels_at_1m=cfg.splat_pixels_at_1m,
             median=cfg.median,
+            inpaint=inpaint,
         )
 
     def match(view):

@@ -31,6 +31,7 @@ __all__ = [
     "DEFAULT_PIXELS_PER_DEGREE",
     "LidarView",
     "heading_rotations",
+    "inpaint_coverage",
     "prior_rotations",
     "render_view",
     "scaled_camera",
@@ -238,6 +239,7 @@ def render_view(
     splat_pixels_at_1m: float = 0.0,
     max_splat: int = 3,
     median: int = 0,
+    inpaint: int = 0,
     heading_deg: float | None = None,
 ) -> LidarView:
     """Render the dense cloud through the scaled real camera at one orientation.
@@ -272,6 +274,10 @@ def render_view(
     median : int, optional
         Median filter size (odd, pixels; 0: off) applied to the filled intensities against the
         speckle of per-point reflectance (accumulated clouds); empty pixels stay 0.
+    inpaint : int, optional
+        Fill every hole of the LiDAR's coverage narrower than this many pixels by inpainting
+        (:func:`inpaint_coverage`; 0: off), after ``fill_radius`` and ``median``: a scan's
+        rings become surfaces, which learned matchers can match to a photograph.
     heading_deg : float, optional
         Recorded heading (default: computed from the optical axis).
 
@@ -315,10 +321,52 @@ def render_view(
             raise ValueError(f"median must be 0 or an odd size >= 3, got {median}")
         intensity = np.where(filled, np.maximum(cv2.medianBlur(intensity, median), 1), 0)
         intensity = intensity.astype(np.uint8)
+    if inpaint:
+        intensity = inpaint_coverage(intensity, inpaint)
     if heading_deg is None:
         axis = R[2]  # optical axis in LiDAR coordinates
         heading_deg = math.degrees(math.atan2(axis[1], axis[0]))
     return LidarView(vcam, T, intensity, index, float(scale), float(heading_deg))
+
+
+def inpaint_coverage(intensity: np.ndarray, width: int) -> np.ndarray:
+    """Inpaint the holes of a LiDAR image inside its coverage (0 = empty stays outside it).
+
+    The coverage is the morphological closing of the filled pixels with a ``width`` x ``width``
+    square: gaps between rings and between sparse points narrower than ``width`` belong to it,
+    the sky above the top ring and the ground below the lowest do not. Holes inside it are
+    filled by OpenCV's Telea inpainting (radius 3) from the shown pixels only; the result is
+    >= 1 there, 0 outside.
+
+    Parameters
+    ----------
+    intensity : ndarray of shape (h, w), uint8
+        LiDAR image, 0 where empty.
+    width : int
+        Widest gap filled, pixels (>= 1).
+
+    Returns
+    -------
+    ndarray of shape (h, w), uint8
+    """
+    import cv2
+
+    img = np.asarray(intensity)
+    if img.ndim != 2 or img.dtype != np.uint8:
+        raise ValueError(f"intensity must be a 2-D uint8 image, got {img.dtype} {img.shape}")
+    width = int(width)
+    if width < 1:
+        raise ValueError(f"width must be >= 1, got {width}")
+    filled = (img > 0).astype(np.uint8)
+    cover = cv2.morphologyEx(filled, cv2.MORPH_CLOSE, np.ones((width, width), np.uint8))
+    holes = (cover > 0) & (filled == 0)
+    if not holes.any():
+        return img.copy()
+    # every empty pixel is unknown to the inpainting (else the empty outside, 0, bleeds into
+    # the coverage's border); only the holes inside the coverage are kept
+    out = cv2.inpaint(img, (filled == 0).astype(np.uint8), 3, cv2.INPAINT_TELEA)
+    out = np.where(cover > 0, np.maximum(out, 1), 0).astype(np.uint8)
+    return out
 
 
 def _fill_index(index: np.ndarray, radius: int) -> np.ndarray:
