@@ -119,9 +119,10 @@ for polish in (False, True):
 # 12 headings around the LiDAR (or around a prior pose), matches each view, keeps the view with
 # the most RANSAC support and pools the views that agree with it.
 #
-# The learned matchers (`nbcalib models export`, once) are much better across the LiDAR-camera
-# gap than the SIFT fallback, which is what runs when no model was exported. With SIFT the
-# guess below may fail; then the success flag says so, and a manual correspondence file
+# The learned matcher that ships with nbcalib (XFeat + LighterGlue, ONNX) is much better across
+# the LiDAR-camera gap than the SIFT fallback, which runs only where onnxruntime's models are
+# hidden (as in the test suite, for speed). With SIFT the guess below may fail; then the success
+# flag says so, and a manual correspondence file
 # (`nbcalib initial-guess WORK --manual picks.json`, or the picker in
 # `nbcalib.initial_guess.picker`) is the fail-safe.
 

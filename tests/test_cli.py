@@ -87,3 +87,16 @@ def test_a_file_where_a_folder_should_be_is_a_user_error(tmp_path, capsys):
     err = capsys.readouterr().err
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1
     assert "file" in err and "not a directory" in err
+
+
+def test_no_retries_switches_the_matching_retries_off():
+    import argparse
+
+    from nbcalib.commands._options import MATCHING, add_options, build_config
+
+    parser = argparse.ArgumentParser()
+    add_options(parser, MATCHING)
+    default = build_config(parser.parse_args([]))
+    assert default.matching.retry_pixels_per_degree == (10.0, 15.0)
+    off = build_config(parser.parse_args(["--no-retries"]))
+    assert off.matching.retry_pixels_per_degree == ()

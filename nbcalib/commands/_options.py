@@ -175,6 +175,9 @@ MATCHING = (
     Option("--search-radius", "matching.search_radius",
            "LiDAR keypoints on empty pixels take the nearest LiDAR point within this radius, "
            "pixels", "PX"),
+    Option("--no-retries", "matching.retry_pixels_per_degree",
+           "match each pair once, even when its guess fails (no finer inpainted views)",
+           value=()),
     Option("--no-picture", "matching.draw", "do not write <name>_matches.png", value=False),
 )  # fmt: skip
 
