@@ -32,16 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-LIDARS = ("spinning16", "spinning32", "spinning64", "spinning128", "livox")
-CAMERAS = (
-    "pinhole",
-    "plumb_bob",
-    "rational_polynomial",
-    "fisheye",
-    "atan",
-    "omnidir",
-    "equirectangular",
-)
+from nbcalib.commands.synth import CAMERAS, LIDARS
+
 #: The paper's criterion for an initial guess.
 GUESS_DEG, GUESS_M = 1.0, 0.5
 #: The synthetic targets of the final result (nbcalib demo).

@@ -320,7 +320,8 @@ class Calibrator:
         )
         self.guess, self._guess_corr = guess, corr
         _detail(guess.summary())
-        source = f"hand-picked correspondences ({self._manual})" if manual else self._matchers()
+        matcher = None if manual else self._matcher_name()
+        source = f"hand-picked correspondences ({self._manual})" if manual else f"{matcher} matches"
         if not guess.success and not self._accept_failed_guess:
             if manual:
                 raise InputError(
@@ -361,7 +362,7 @@ class Calibrator:
                 "seed": self.config.seed,
                 "confidence_weights": bool(cfg.confidence_weights and corr.confidence is not None),
                 "source": str(self._manual) if manual else "matches",
-                "matcher": None if manual else self._matchers().removesuffix(" matches"),
+                "matcher": matcher,
             }
         self._remember("initial-guess", calib)
 
@@ -587,8 +588,8 @@ class Calibrator:
         self._guess_parts = parts
         return pool_correspondences(parts), AUTO_STAGE, where
 
-    def _matchers(self) -> str:
-        """Which matcher made the correspondences, for messages ("xfeat-lighterglue matches")."""
+    def _matcher_name(self) -> str:
+        """Which matcher made the correspondences ("xfeat-lighterglue"; "keypoint" if unknown)."""
         names = {m.matcher for m in self.matches.values()} if self.matches else set()
         if not names and self.work is not None:
             for pair in self._pairs():
@@ -598,7 +599,7 @@ class Calibrator:
                     continue
                 if isinstance(doc, dict) and isinstance(doc.get("matcher"), str):
                     names.add(doc["matcher"])
-        return f"{' + '.join(sorted(names)) or 'keypoint'} matches"
+        return " + ".join(sorted(names)) or "keypoint"
 
     def _start_pose(self, *, required: bool = True) -> Start | None:
         """Where fine registration starts (or started), in this order of precedence.

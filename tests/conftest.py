@@ -28,16 +28,20 @@ def real_data() -> Path:
     return REAL_DATA
 
 
-@pytest.fixture
-def no_learned_models(tmp_path, monkeypatch):
-    """No learned matcher anywhere: an empty model directory and the shipped ones hidden.
+def hide_learned_models(monkeypatch, empty: Path) -> Path:
+    """No learned matcher anywhere: ``empty`` as the model directory, the shipped ones hidden.
 
     The path of an install without onnxruntime models (``auto`` falls back to SIFT).
     """
     from nbcalib.matching import onnx_matcher
 
-    empty = tmp_path / "no-models"
     empty.mkdir(exist_ok=True)
     monkeypatch.setenv("NBCALIB_MODEL_DIR", str(empty))
     monkeypatch.setattr(onnx_matcher, "packaged_model_dir", lambda: empty)
     return empty
+
+
+@pytest.fixture
+def no_learned_models(tmp_path, monkeypatch):
+    """:func:`hide_learned_models` into ``tmp_path / "no-models"``."""
+    return hide_learned_models(monkeypatch, tmp_path / "no-models")

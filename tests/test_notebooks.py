@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import hide_learned_models
 
 NOTEBOOKS = sorted((Path(__file__).parents[1] / "notebooks").glob("[0-9][0-9]_*.py"))
 
@@ -32,11 +33,7 @@ def run_notebook(notebook: Path, tmp_path: Path, monkeypatch) -> dict:
     monkeypatch.setenv("MPLBACKEND", "Agg")
     monkeypatch.setenv("PYVISTA_OFF_SCREEN", "true")
     # the same path on every machine: no learned matcher, so the SIFT fallback (fast)
-    from nbcalib.matching import onnx_matcher
-
-    (tmp_path / "no_models").mkdir()
-    monkeypatch.setenv("NBCALIB_MODEL_DIR", str(tmp_path / "no_models"))
-    monkeypatch.setattr(onnx_matcher, "packaged_model_dir", lambda: tmp_path / "no_models")
+    hide_learned_models(monkeypatch, tmp_path / "no_models")
     work = tmp_path / "work"
     work.mkdir()
     monkeypatch.chdir(work)
