@@ -52,6 +52,7 @@ from pathlib import Path
 from typing import Any
 
 from nbcalib.errors import InputError
+from nbcalib.progress import Progress
 
 #: Version of the manifest layout this module reads.
 SCHEMA_VERSION = 1
@@ -501,7 +502,7 @@ def verify_dataset(
     directory: str | os.PathLike,
     *,
     hashes: bool = True,
-    progress: ProgressCallback | None = None,
+    progress: bool | ProgressCallback | None = None,
 ) -> list[FileCheck]:
     """Check a downloaded copy of a dataset against its manifest; nothing is downloaded.
 
@@ -512,8 +513,9 @@ def verify_dataset(
         The folder the files were downloaded (and unpacked) into.
     hashes : bool, keyword-only
         Compute SHA-256 of files whose hash the manifest knows (reads every byte).
-    progress : callable, keyword-only, optional
-        ``progress(done_bytes, total_bytes, file_name)`` while hashing, for a progress bar.
+    progress : bool or callable, keyword-only, optional
+        While hashing: ``True`` for a progress display per file (:func:`sha256_file`), or
+        ``progress(done_bytes, total_bytes, file_name)``.
 
     Returns
     -------
@@ -562,25 +564,29 @@ def _absent_check(root: Path, entry: ManifestFile) -> FileCheck:
     return FileCheck(entry, "missing", f"not found{where}")
 
 
-def sha256_file(path: str | os.PathLike, *, progress: ProgressCallback | None = None) -> str:
+def sha256_file(path: str | os.PathLike, *, progress: bool | ProgressCallback | None = None) -> str:
     """Lower-case hex SHA-256 of a file, read in 1 MiB chunks.
 
     Parameters
     ----------
     path : str or PathLike
-    progress : callable, keyword-only, optional
+    progress : bool or callable, keyword-only, optional
+        ``True`` for a progress display in bytes (:class:`nbcalib.progress.Progress`: a bar on a
+        terminal, step lines in a log, nothing when the ``nbcalib`` logger is quiet), or
         ``progress(done_bytes, total_bytes, file_name)`` after every chunk.
     """
     path = Path(path)
     total = path.stat().st_size
     digest = hashlib.sha256()
     done = 0
-    with open(path, "rb") as stream:
+    display = Progress(total, "sha256", enabled=progress is True, unit="B")
+    with display, open(path, "rb") as stream:
         for chunk in _chunks(stream):
             digest.update(chunk)
             done += len(chunk)
-            if progress is not None:
+            if callable(progress):
                 progress(done, total, path.name)
+            display.update(len(chunk), path.name)
     return digest.hexdigest()
 
 

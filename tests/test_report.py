@@ -422,3 +422,31 @@ def test_report_strict_exit_status(workdir):
     calib.set_T_camera_lidar("T_lidar_camera", se3_exp(np.array([0.07, 0, 0.03, 0, 0.02, 0])))
     workdir.write_calib(calib)
     assert main(["report", str(workdir.path), "--strict"]) == 3  # without --strict: 0 (above)
+
+
+def test_an_uncertainty_no_rig_can_have_is_called_unbounded():
+    from nbcalib.report.quality import format_bound
+
+    assert format_bound(0.5234, "cm") == "0.52 cm"
+    assert format_bound(0.03123, "deg") == "0.031 deg"
+    for value, unit in ((7.97e152, "cm"), (8472.88, "deg"), (float("inf"), "cm")):
+        assert format_bound(value, unit).startswith("unbounded")
+
+
+def test_lidar_edges_of_a_sparse_image_are_its_edges_not_its_points():
+    """A rosette-like image (a tenth of the pixels filled) of two flat halves: the edge points
+    are those along the step, not every point against its empty neighbours."""
+    from nbcalib.report.figures import lidar_edge_points
+
+    rng = np.random.default_rng(0)
+    h, w = 120, 160
+    filled = rng.random((h, w)) < 0.1
+    intensity = np.where(np.arange(w)[None, :] < w // 2, 40, 200).astype(np.uint8)
+    intensity = np.where(filled, intensity, 0).astype(np.uint8)
+    index = np.full((h, w), -1, dtype=np.int32)
+    index[filled] = np.arange(filled.sum())
+    points = np.column_stack([np.ones(filled.sum()) * 5.0, np.zeros((filled.sum(), 2))])
+    edges = lidar_edge_points(intensity, index, points)
+    cols = np.argwhere(filled)[:, 1][edges]
+    assert 0 < len(edges) < 0.25 * filled.sum()
+    assert np.all(np.abs(cols - w // 2) <= 8)

@@ -8,8 +8,6 @@ differs, and otherwise prints the ``nbcalib run`` command for the downloaded cop
 from __future__ import annotations
 
 import argparse
-import sys
-import time
 from pathlib import Path
 
 DESCRIPTION = """\
@@ -78,7 +76,9 @@ def add_parser(subparsers, formatter_class=argparse.HelpFormatter) -> argparse.A
         help="work directory for the printed run command (default: <NAME>_work)",
     )
     p_verify.add_argument("--no-hash", action="store_true", help="check sizes only (faster)")
-    p_verify.add_argument("--no-progress", action="store_true", help="no progress bar")
+    p_verify.add_argument(
+        "--no-progress", action="store_true", help="no progress display while hashing"
+    )
     p_verify.add_argument("--manifests", metavar="DIR", type=Path, help=manifests_help)
     parser.set_defaults(data_parser=parser)
     return parser
@@ -118,11 +118,9 @@ def _verify(args) -> int:
     from nbcalib.errors import InputError
 
     manifest = find_manifest(args.name, args.manifests)
-    bar = _HashProgress(enabled=not args.no_progress)
-    try:
-        checks = verify_dataset(manifest, args.directory, hashes=not args.no_hash, progress=bar)
-    finally:
-        bar.close()
+    checks = verify_dataset(
+        manifest, args.directory, hashes=not args.no_hash, progress=not args.no_progress
+    )
     print(f"{manifest.name}: {args.directory}")
     for check in checks:
         print(f"  {check.status:<13} {check.file.path}: {check.detail}")
@@ -211,31 +209,3 @@ def _wrap(text: str) -> str:
     import textwrap
 
     return textwrap.fill(" ".join(text.split()), width=100)
-
-
-class _HashProgress:
-    """A one-line progress bar on stderr while hashing (only when stderr is a terminal)."""
-
-    def __init__(self, enabled: bool):
-        self.enabled = enabled and sys.stderr.isatty()
-        self.start = time.perf_counter()
-        self.name = None
-        self.shown = False
-
-    def __call__(self, done: int, total: int, name: str) -> None:
-        if not self.enabled:
-            return
-        if name != self.name:  # a new file: its own rate
-            self.name, self.start = name, time.perf_counter()
-        width = 30
-        filled = int(width * done / max(total, 1))
-        rate = done / max(time.perf_counter() - self.start, 1e-9) / 1e6
-        bar = "#" * filled + "." * (width - filled)
-        sys.stderr.write(f"\rsha256 {name[:30]:<30} [{bar}] {done / 1e6:8.1f} MB {rate:6.0f} MB/s")
-        sys.stderr.flush()
-        self.shown = True
-
-    def close(self) -> None:
-        if self.shown:
-            sys.stderr.write("\n")
-            sys.stderr.flush()

@@ -61,6 +61,7 @@ def run(args) -> int:
 def print_verdict(report) -> None:
     """The verdict, its reasons, the uncertainty and where the report is (``nbcalib run`` too)."""
     from nbcalib.report.html import move_summary
+    from nbcalib.report.quality import format_bound
 
     u = report.uncertainty
     move = move_summary(report.quality)
@@ -68,7 +69,8 @@ def print_verdict(report) -> None:
         f"verdict: {report.verdict}"
         + "".join(f"\n  - {reason}" for reason in report.reasons)
         + f"\nuncertainty ({100 * u['confidence']:.0f} %): translation <= "
-        f"{u['translation_total_cm']:.2f} cm, rotation <= {u['rotation_total_deg']:.3f} deg"
+        f"{format_bound(u['translation_total_cm'], 'cm')}, rotation <= "
+        f"{format_bound(u['rotation_total_deg'], 'deg')}"
         + (f"\n{move}" if move else "")
         + f"\nreport: {report.html_path}"
     )

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import argparse
-import sys
 import time
+
+from nbcalib.commands._args import add_verbosity_arguments
 
 LIDARS = ("spinning16", "spinning32", "spinning64", "spinning128", "livox")
 CAMERAS = (
@@ -121,32 +122,8 @@ def add_parser(subparsers, formatter_class) -> argparse.ArgumentParser:
         action="store_true",
         help="use the parallel kernels (same output; no gain measured yet, docs/BENCHMARKS.md)",
     )
+    add_verbosity_arguments(p)
     return p
-
-
-class _ProgressBar:
-    """A one-line progress bar on stderr (only when stderr is a terminal)."""
-
-    def __init__(self, enabled: bool):
-        self.enabled = enabled and sys.stderr.isatty()
-        self.start = time.perf_counter()
-
-    def __call__(self, done: int, total: int, what: str) -> None:
-        if not self.enabled:
-            return
-        width = 30
-        filled = int(width * done / max(total, 1))
-        elapsed = time.perf_counter() - self.start
-        bar = "#" * filled + "." * (width - filled)
-        sys.stderr.write(
-            f"\r[{bar}] {100 * done / max(total, 1):3.0f}% {elapsed:5.1f} s  {what:<30}"
-        )
-        sys.stderr.flush()
-
-    def close(self) -> None:
-        if self.enabled:
-            sys.stderr.write("\n")
-            sys.stderr.flush()
 
 
 def run(args) -> int:
@@ -156,10 +133,12 @@ def run(args) -> int:
     from nbcalib.errors import InputError
     from nbcalib.synthetic import RigConfig
     from nbcalib.synthetic.writer import export_dataset
+    from nbcalib.workdir import check_writable
 
     out = Path(args.out)
     if out.exists() and not out.is_dir():
         raise InputError("exists and is not a folder", path=out)
+    check_writable(out)  # before the simulation, not after it
     if args.pairs < 1:
         raise InputError(f"--pairs must be at least 1, got {args.pairs}")
     if args.duration is not None and not args.duration > 0:
@@ -191,11 +170,7 @@ def run(args) -> int:
         parallel=args.parallel,
     )
     start = time.perf_counter()
-    bar = _ProgressBar(enabled=not getattr(args, "quiet", False))
-    try:
-        truth = export_dataset(config, out, pairs=args.pairs, fmt=args.fmt, progress=bar)
-    finally:
-        bar.close()
+    truth = export_dataset(config, out, pairs=args.pairs, fmt=args.fmt, progress=True)
     points = sum(p["num_points"] for p in truth["pairs"])
     print(
         f"nbcalib synth: {args.pairs} pair(s), {points} LiDAR points, {args.lidar} + "

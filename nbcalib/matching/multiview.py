@@ -177,6 +177,7 @@ def match_views(
     seed: int = 0,
     name: str = "",
     model_dir: str | os.PathLike | None = None,
+    progress=None,
     **overrides,
 ) -> MultiViewMatches:
     """Match the camera image with camera-shaped LiDAR views (module docstring).
@@ -208,6 +209,9 @@ def match_views(
         Data name recorded in the correspondences.
     model_dir : str or os.PathLike, optional
         Exported models.
+    progress : callable, optional
+        Called as ``progress(done, total)`` after each heading (rendered, and matched unless
+        it shows too little).
     **overrides
         Attributes of :class:`MatchConfig` to change for this call.
 
@@ -295,6 +299,8 @@ def match_views(
         view = render(R, None if translations is None else translations[k])
         if view.fill_fraction >= cfg.min_fill:
             results.append(match(view))
+        if progress is not None:
+            progress(k + 1, len(rotations))
     best = -1
     if results:
         best = int(np.argmax([v.ransac_inliers for v in results]))

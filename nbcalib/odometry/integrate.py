@@ -163,7 +163,9 @@ def integrate_dynamic(
         Scans per second, Hz; only used to synthesise per-point times from the azimuth when a
         scan carries none.
     progress : bool or callable, optional
-        ``True`` for a progress bar on stderr, or a callback ``(done, total)``.
+        ``True`` for a progress display (:class:`nbcalib.progress.Progress`: a bar on a
+        terminal, step lines in a log, nothing when the ``nbcalib`` logger is quiet), or a
+        callback ``(done, total)``.
 
     Returns
     -------
@@ -193,6 +195,9 @@ def integrate_dynamic(
 
     try:
         return _integrate_dynamic_loop(scans, times, icp, report, n_scans, min_distance, sweep)
+    except BaseException:
+        report.close(failed=True)  # end a bar's line; the loop closes it on success
+        raise
     finally:
         icp.close()
 

@@ -12,12 +12,13 @@ the scan (:func:`normalized_scan_times`).
 from __future__ import annotations
 
 import math
-import sys
 from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+
+from nbcalib.progress import Progress
 
 __all__ = ["normalized_scan_times", "synthesize_times_from_azimuth"]
 
@@ -153,33 +154,19 @@ def _iterate_scans(scans: Iterable, times: Sequence | None) -> Iterable[tuple[in
 
 
 class _Progress:
-    """Progress reporting: a callback ``(done, total)``, a bar on stderr, or nothing."""
+    """A ``progress=`` argument: a callback ``(done, total)``, a display (``True``), or nothing."""
 
     def __init__(self, progress: bool | ProgressCallback | None, total: int | None, label: str):
         self.callback = progress if callable(progress) else None
-        self.bar = progress is True
-        self.total = total
-        self.label = label
+        self.display = Progress(total, label, enabled=progress is True)
 
     def __call__(self, done: int) -> None:
         if self.callback is not None:
-            self.callback(done, self.total)
-        if self.bar:
-            if self.total:
-                width = 30
-                filled = int(width * done / self.total)
-                text = (
-                    f"\r{self.label} [{'#' * filled}{'.' * (width - filled)}] {done}/{self.total}"
-                )
-            else:
-                text = f"\r{self.label} {done} scans"
-            sys.stderr.write(text)
-            sys.stderr.flush()
+            self.callback(done, self.display.total)
+        self.display.update(done - self.display.done, "scans")
 
-    def close(self) -> None:
-        if self.bar:
-            sys.stderr.write("\n")
-            sys.stderr.flush()
+    def close(self, failed: bool = False) -> None:
+        self.display.close(failed)
 
 
 def synthesize_times_from_azimuth(

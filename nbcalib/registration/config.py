@@ -92,6 +92,10 @@ class RefineConfig:
         Multithreaded NID kernels (same values; slower in CPU time on a loaded machine).
     max_pairs : int or None
         Register only the first ``max_pairs`` pairs of a job (None: all).
+    min_visible_points : int
+        Fewer LiDAR points than this in the images at a pose being refined is refused (a user
+        error: the start looks away from the cloud, or the camera does not fit the images):
+        a joint histogram of 16 x 16 bins needs a few points per cell.
     """
 
     optimizer: str = "hybrid"
@@ -116,6 +120,7 @@ class RefineConfig:
     structure_weight: float = 0.0
     parallel: bool = True
     max_pairs: int | None = None
+    min_visible_points: int = 100
 
     def __post_init__(self):
         if self.optimizer not in OPTIMIZERS:
@@ -144,6 +149,8 @@ class RefineConfig:
             raise ValueError(f"min_class_points must be >= 1, got {self.min_class_points}")
         if self.max_pairs is not None and self.max_pairs < 1:
             raise ValueError(f"max_pairs must be >= 1, got {self.max_pairs}")
+        if self.min_visible_points < 1:
+            raise ValueError(f"min_visible_points must be >= 1, got {self.min_visible_points}")
         if self.bins < 2:
             raise ValueError(f"bins must be >= 2, got {self.bins}")
         if self.min_pyramid_size < 16:

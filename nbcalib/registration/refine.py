@@ -46,6 +46,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from nbcalib.camera import CameraModel, create_camera
+from nbcalib.errors import InputError
+from nbcalib.progress import Progress
 from nbcalib.registration.config import RefineConfig
 from nbcalib.registration.nid import MultiNIDCost, NIDCost
 from nbcalib.registration.optimize import InnerResult, minimize_lbfgs, minimize_nelder_mead
@@ -365,7 +367,7 @@ def refine(
     T_camera_lidar_init,
     config: RefineConfig | None = None,
     *,
-    progress: Callable[[int, OuterIteration], None] | None = None,
+    progress: bool | Callable[[int, OuterIteration], None] | None = None,
 ) -> RefineResult:
     """Refine ``T_camera_lidar`` by NID minimisation with hidden-point removal.
 
@@ -376,8 +378,10 @@ def refine(
     T_camera_lidar_init : array_like of shape (4, 4)
         Initial guess, ``p_camera = T_camera_lidar @ p_lidar``.
     config : RefineConfig, optional
-    progress : callable, optional
-        Called as ``progress(outer_index, OuterIteration)`` after each outer iteration.
+    progress : bool or callable, optional
+        ``True`` for a progress display (:class:`nbcalib.progress.Progress`: a bar on a
+        terminal, step lines in a log, nothing when the ``nbcalib`` logger is quiet), or a
+        callback ``progress(outer_index, OuterIteration)`` after each outer iteration.
 
     Returns
     -------
@@ -403,8 +407,15 @@ def refine(
         ]
     else:
         stages = [config]
-    for stage in stages:
-        _run_levels(pairs, region, stage, result, progress)
+    with Progress(label="refine", enabled=progress is True) as display:
+
+        def report(outer: int, step: OuterIteration) -> None:
+            if callable(progress):
+                progress(outer, step)
+            display.update(what=f"outer iterations (level {step.level}, NID {step.nid:.5f})")
+
+        for stage in stages:
+            _run_levels(pairs, region, stage, result, report)
     return result
 
 
@@ -429,8 +440,7 @@ def _run_levels(
             result.history.append(step)
             T = T_new
             result.T_camera_lidar = T.copy()
-            if progress is not None:
-                progress(outer, step)
+            progress(outer, step)
             if (
                 dt < scale * config.converge_translation
                 and dr < scale * config.converge_rotation_deg
@@ -459,8 +469,12 @@ def _outer_iteration(
     """
     t0 = time.perf_counter()
     cost, counts = build_cost(pairs, T, config, level=level)
-    if sum(counts) == 0:
-        raise ValueError("no LiDAR point projects into any image at the current pose")
+    if sum(counts) < config.min_visible_points:
+        raise InputError(
+            f"only {sum(counts)} LiDAR points fall into the image(s) at the pose being refined "
+            f"(need {config.min_visible_points}): the start does not look at the cloud, or the "
+            "camera does not fit the images"
+        )
     start_value = cost.value(T)
     inner: InnerResult
     if config.optimizer == "lbfgs":

@@ -31,8 +31,9 @@ import numpy as np
 from nbcalib.errors import InputError, MissingExtraError, require
 from nbcalib.io._files import write_bytes_atomic, write_text_atomic
 from nbcalib.io.calib_json import FINAL_STAGE
+from nbcalib.progress import Progress
 from nbcalib.report.config import AssessConfig
-from nbcalib.report.quality import AXIS_NAMES, Quality
+from nbcalib.report.quality import AXIS_NAMES, Quality, format_bound
 
 __all__ = ["REPORT_DIR", "Report", "make_report", "move_summary", "write_report"]
 
@@ -128,7 +129,7 @@ def write_report(
     refine_config,
     init_stage: str | None,
     *,
-    progress: Callable[[str], None] | None = None,
+    progress: bool | Callable[[str], None] | None = None,
 ) -> Report:
     """Write ``report/index.html`` with its figures, and the figures into ``calib.json``.
 
@@ -150,41 +151,52 @@ def write_report(
         Its settings (hidden-point removal for the overlays).
     init_stage : str or None
         Name of the start (``init_T_lidar_camera_auto``, ``--init``...), shown on the page.
-    progress : callable, optional
-        Called with a short text after each step.
+    progress : bool or callable, optional
+        ``True`` for a progress display (:class:`nbcalib.progress.Progress`: a bar on a
+        terminal, step lines in a log, nothing when the ``nbcalib`` logger is quiet), or a
+        callback called with the name of each file written.
     """
-    step = progress or (lambda what: None)
     try:
         require("matplotlib", "viz")
         have_mpl = True
     except MissingExtraError:
         have_mpl = False
-    T = np.asarray(T_camera_lidar, dtype=np.float64)
-    final = work.path / REPORT_DIR
-    tmp = work.path / f".{REPORT_DIR}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp"
-    tmp.mkdir()
-    try:
-        figures = []
-        if have_mpl:
-            figures = _write_figures(tmp, quality, loaded, pairs, refine_config, T, T_init)
-        step("figures")
-        page = _page(quality, work.path, figures, have_mpl, init_stage)
-        write_text_atomic(tmp / "index.html", page)  # last: marks the folder complete
-        _swap_in(tmp, final)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+    n_figures = 2 + 2 * min(len(loaded), len(pairs), MAX_PAIRS_DRAWN) if have_mpl else 0
+    with Progress(n_figures + 2, "report", enabled=progress is True) as display:
 
-    calib = work.read_calib()  # re-read: keep whatever changed meanwhile
-    entry = quality.to_dict()
-    entry["report"] = f"{REPORT_DIR}/index.html"
-    entry["written"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
-    entry["assessed_T_lidar_camera"] = list(calib.results.get(FINAL_STAGE, []))
-    calib.nbcalib["quality"] = entry
-    from nbcalib.io.calib_json import write_calib_json
+        def step(what: str) -> None:
+            if callable(progress):
+                progress(what)
+            display.update(what=what)
 
-    write_calib_json(work.calib_path, calib)
-    step("calib.json")
+        T = np.asarray(T_camera_lidar, dtype=np.float64)
+        final = work.path / REPORT_DIR
+        tmp = work.path / f".{REPORT_DIR}.{os.getpid()}.{uuid.uuid4().hex[:8]}.tmp"
+        tmp.mkdir()
+        try:
+            figures = []
+            if have_mpl:
+                figures = _write_figures(
+                    tmp, quality, loaded, pairs, refine_config, T, T_init, step
+                )
+            page = _page(quality, work.path, figures, have_mpl, init_stage)
+            write_text_atomic(tmp / "index.html", page)  # last: marks the folder complete
+            step("index.html")
+            _swap_in(tmp, final)
+        except BaseException:
+            shutil.rmtree(tmp, ignore_errors=True)
+            raise
+
+        calib = work.read_calib()  # re-read: keep whatever changed meanwhile
+        entry = quality.to_dict()
+        entry["report"] = f"{REPORT_DIR}/index.html"
+        entry["written"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+        entry["assessed_T_lidar_camera"] = list(calib.results.get(FINAL_STAGE, []))
+        calib.nbcalib["quality"] = entry
+        from nbcalib.io.calib_json import write_calib_json
+
+        write_calib_json(work.calib_path, calib)
+        step("calib.json")
     return Report(
         html_path=final / "index.html",
         verdict=quality.verdict,
@@ -206,7 +218,7 @@ def _swap_in(tmp: Path, final: Path) -> None:
         shutil.rmtree(old, ignore_errors=True)
 
 
-def _write_figures(folder: Path, quality, loaded, pairs, config, T, T_init) -> list[Path]:
+def _write_figures(folder: Path, quality, loaded, pairs, config, T, T_init, step) -> list[Path]:
     from nbcalib.registration.refine import visible_subset
     from nbcalib.report import figures as fg
 
@@ -216,6 +228,7 @@ def _write_figures(folder: Path, quality, loaded, pairs, config, T, T_init) -> l
         path = folder / name
         write_bytes_atomic(path, [data])
         written.append(path)
+        step(name)
 
     save("nid_curves.png", fg.nid_curves(quality))
     save("pairs_uncertainty.png", fg.pairs_and_uncertainty(quality))
@@ -259,12 +272,20 @@ img { max-width: 100%; border: 1px solid #ddd; margin: 0.3em 0 1em; }
 """
 
 
+def _axis(value: float, unit: str) -> str:
+    """One axis's half-width for the table: the number, or "unbounded"."""
+    text = format_bound(value, unit)
+    return "unbounded" if text.startswith("unbounded") else text.removesuffix(f" {unit}")
+
+
 def _summary_html(q: Quality) -> str:
     u = q.uncertainty
     conf = 100 * u.get("confidence", 0.95)
     reasons = "".join(f"<li>{html.escape(r)}</li>" for r in q.reasons) or "<li>none</li>"
-    t = [f"{x:.2f}" for x in u["translation_cm"]]
-    r = [f"{x:.3f}" for x in u["rotation_deg"]]
+    t = [_axis(x, "cm") for x in u["translation_cm"]]
+    r = [_axis(x, "deg") for x in u["rotation_deg"]]
+    t_total = format_bound(u["translation_total_cm"], "cm").removesuffix(" cm")
+    r_total = format_bound(u["rotation_total_deg"], "deg").removesuffix(" deg")
     return (
         f'<h2>Verdict: <span class="{q.verdict}">{q.verdict}</span></h2>'
         f"<p>Reasons to distrust the result:</p><ul>{reasons}</ul>"
@@ -272,9 +293,9 @@ def _summary_html(q: Quality) -> str:
         "<table><tr><th></th><th>x (right)</th><th>y (down)</th><th>z (forward)</th>"
         "<th>total (norm)</th></tr>"
         f"<tr><th>translation, cm</th><td>&plusmn;{t[0]}</td><td>&plusmn;{t[1]}</td>"
-        f"<td>&plusmn;{t[2]}</td><td>&le; {u['translation_total_cm']:.2f}</td></tr>"
+        f"<td>&plusmn;{t[2]}</td><td>&le; {html.escape(t_total)}</td></tr>"
         f"<tr><th>rotation, deg</th><td>&plusmn;{r[0]}</td><td>&plusmn;{r[1]}</td>"
-        f"<td>&plusmn;{r[2]}</td><td>&le; {u['rotation_total_deg']:.3f}</td></tr></table>"
+        f"<td>&plusmn;{r[2]}</td><td>&le; {html.escape(r_total)}</td></tr></table>"
         f'<p class="note">Camera axes; translation = displacement of the camera centre. '
         f"Method: {html.escape(str(u.get('method', '')))}.</p>"
     )

@@ -61,11 +61,12 @@ Example
 from __future__ import annotations
 
 import math
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
 
+from nbcalib.progress import Progress
 from nbcalib.registration.refine import RefineConfig, RegistrationPair, build_cost, visible_subset
 from nbcalib.registration.trust import on_trust_boundary
 from nbcalib.report.config import AssessConfig
@@ -254,6 +255,27 @@ class Quality:
         return out
 
 
+#: An uncertainty beyond these says only that the cost does not pin the pose down: no rig's
+#: extrinsic is unknown by more than 10 metres, and no rotation error exceeds 180 degrees.
+UNBOUNDED_CM = 1000.0
+UNBOUNDED_DEG = 180.0
+
+
+def format_bound(value: float, unit: str) -> str:
+    """An uncertainty as people read it: ``"0.52 cm"``, ``"0.031 deg"``, or ``"unbounded"``.
+
+    Parameters
+    ----------
+    value : float
+        Centimetres (``unit="cm"``) or degrees (``unit="deg"``).
+    unit : {"cm", "deg"}
+    """
+    limit, digits = (UNBOUNDED_CM, 2) if unit == "cm" else (UNBOUNDED_DEG, 3)
+    if not math.isfinite(value) or abs(value) > limit:
+        return f"unbounded (> {limit:g} {unit}: the cost does not fix it)"
+    return f"{value:.{digits}f} {unit}"
+
+
 def _finite(value, cap: float = 1e6):
     """Replace non-finite numbers (JSON cannot hold them) by +-cap, recursively."""
     if isinstance(value, dict):
@@ -275,6 +297,7 @@ def assess(
     converged: bool | None = None,
     assess_config: AssessConfig | None = None,
     start_uncertainty: tuple[float, float] | None = None,
+    progress: bool | Callable[[str], None] | None = None,
 ) -> Quality:
     """Judge a calibration result: NID curves, uncertainty, verdict (module docstring).
 
@@ -296,6 +319,10 @@ def assess(
     start_uncertainty : tuple of 2 floats, optional
         How far ``T_init`` may be from the truth, metres and degrees, at the report's
         confidence (default: not stated, the trust region stands in; module docstring).
+    progress : bool or callable, optional
+        ``True`` for a progress display (:class:`nbcalib.progress.Progress`: a bar on a
+        terminal, step lines in a log, nothing when the ``nbcalib`` logger is quiet), or a
+        callback called with a short text after each step (a pair, an NID curve).
 
     Returns
     -------
@@ -315,27 +342,35 @@ def assess(
     T = validate_T(np.asarray(T_camera_lidar, dtype=np.float64), "T_camera_lidar")
     steps = np.array([acfg.hessian_translation] * 3 + [math.radians(acfg.hessian_rotation_deg)] * 3)
 
-    costs, nids, visible, pixels, grads = [], [], [], [], []
-    hessians, raw_hessians, remeasured = [], [], []
-    for pair in pairs:
-        cost, counts = build_cost([pair], T, rcfg)
-        value, grad = cost.value_and_grad(T)
-        visible.append(counts[0])
-        pixels.append(_pixels_covered(pair, T, rcfg))
-        nids.append(value)
-        grads.append(grad)
-        H_raw = _hessian(cost, T, steps) if counts[0] > 0 else np.zeros((6, 6))
-        H, n_again = H_raw, 0
-        if counts[0] > 0:
-            H, n_again = _remeasure_flat_directions(
-                cost, T, H_raw, steps, value, acfg.max_curvature_scale
-            )
-        hessians.append(H)
-        raw_hessians.append(H_raw)
-        remeasured.append(n_again)
-        costs.append(cost)
+    with Progress(len(pairs) + 6, "quality", enabled=progress is True) as display:
 
-    curve_offsets, curve_values = _curves(costs, T, acfg)
+        def step(what: str) -> None:
+            if callable(progress):
+                progress(what)
+            display.update(what=what)
+
+        costs, nids, visible, pixels, grads = [], [], [], [], []
+        hessians, raw_hessians, remeasured = [], [], []
+        for pair in pairs:
+            cost, counts = build_cost([pair], T, rcfg)
+            value, grad = cost.value_and_grad(T)
+            visible.append(counts[0])
+            pixels.append(_pixels_covered(pair, T, rcfg))
+            nids.append(value)
+            grads.append(grad)
+            H_raw = _hessian(cost, T, steps) if counts[0] > 0 else np.zeros((6, 6))
+            H, n_again = H_raw, 0
+            if counts[0] > 0:
+                H, n_again = _remeasure_flat_directions(
+                    cost, T, H_raw, steps, value, acfg.max_curvature_scale
+                )
+            hessians.append(H)
+            raw_hessians.append(H_raw)
+            remeasured.append(n_again)
+            costs.append(cost)
+            step(f"Hessian of {pair.name or f'pair {len(costs) - 1}'}")
+
+        curve_offsets, curve_values = _curves(costs, T, acfg, step)
     init_change = None
     if T_init is not None:
         T0 = validate_T(np.asarray(T_init, dtype=np.float64), "T_init")
@@ -479,8 +514,11 @@ def _remeasure_flat_directions(
     return (V * w) @ V.T, n_again
 
 
-def _curves(costs, T: np.ndarray, config: AssessConfig) -> tuple[np.ndarray, np.ndarray]:
-    """Summed NID along each axis; offsets (6, S) in m / rad, values (6, S)."""
+def _curves(costs, T: np.ndarray, config: AssessConfig, step) -> tuple[np.ndarray, np.ndarray]:
+    """Summed NID along each axis; offsets (6, S) in m / rad, values (6, S).
+
+    ``step(what)`` is called after each axis.
+    """
     s = np.linspace(-1.0, 1.0, config.curve_samples)
     spans = [config.curve_translation] * 3 + [math.radians(config.curve_rotation_deg)] * 3
     offsets = np.array([span * s for span in spans])
@@ -491,6 +529,7 @@ def _curves(costs, T: np.ndarray, config: AssessConfig) -> tuple[np.ndarray, np.
             d[axis] = offset
             Td = se3_exp(d) @ T
             values[axis, i] = sum(c.value(Td) for c in costs)
+        step(f"NID curve {AXIS_NAMES[axis]}")
     return offsets, values
 
 
@@ -638,12 +677,12 @@ def _reasons(q: Quality, n_negative: int, pair_mahalanobis: list[float]) -> list
         flat.append(f"{n_negative} direction(s) with no curvature")
     if u["translation_total_cm"] > 100.0 * c.max_translation_uncertainty:
         flat.append(
-            f"translation uncertainty {u['translation_total_cm']:.1f} cm "
+            f"translation uncertainty {format_bound(u['translation_total_cm'], 'cm')} "
             f"(limit {100 * c.max_translation_uncertainty:.1f})"
         )
     if u["rotation_total_deg"] > c.max_rotation_uncertainty_deg:
         flat.append(
-            f"rotation uncertainty {u['rotation_total_deg']:.2f} deg "
+            f"rotation uncertainty {format_bound(u['rotation_total_deg'], 'deg')} "
             f"(limit {c.max_rotation_uncertainty_deg:.2f})"
         )
     n_pairs = max(len(q.names), 1)

@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from nbcalib.io._files import write_text_atomic
+from nbcalib.progress import Progress
 from nbcalib.synthetic.lidar import LidarScan
 from nbcalib.synthetic.rig import RigConfig, SyntheticSequence, generate_sequence
 from nbcalib.transforms import pose_to_xyz_quat
@@ -180,7 +181,7 @@ def export_dataset(
     *,
     pairs: int = 1,
     fmt: str = "files",
-    progress: Callable[[int, int, str], None] | None = None,
+    progress: bool | Callable[[int, int, str], None] | None = None,
 ) -> dict:
     """Simulate ``pairs`` pairs and write them, the camera and the ground truth to ``out_dir``.
 
@@ -194,7 +195,9 @@ def export_dataset(
         Number of pairs (one scene and trajectory each, the same rig).
     fmt : {"files", "bag1", "bag2", "mcap"}
         PNG + PCD files, or one bag per pair.
-    progress : callable, optional
+    progress : bool or callable, optional
+        ``True`` for a progress display (:class:`nbcalib.progress.Progress`: a bar on a
+        terminal, step lines in a log, nothing when the ``nbcalib`` logger is quiet), or
         ``progress(done, total, what)`` after each simulated or written step.
 
     Returns
@@ -213,15 +216,34 @@ def export_dataset(
     truth_path = out_dir / "ground_truth.json"
     if truth_path.exists():
         truth_path.unlink()  # a half-rewritten folder must not look complete
+    with Progress(label="synth", enabled=progress is True) as display:
+
+        def report(done: int, total: int, what: str) -> None:
+            if callable(progress):
+                progress(done, total, what)
+            display.total = total
+            display.update(done - display.done, what)
+
+        infos, T_camera_lidar, camera = _export_pairs(config, out_dir, pairs, fmt, report)
+    save_camera(out_dir / "camera.yaml", camera)
+    truth = ground_truth_dict(config, infos, T_camera_lidar)
+    write_text_atomic(truth_path, json.dumps(truth, indent=2, sort_keys=True) + "\n")
+    return truth
+
+
+def _export_pairs(config: RigConfig, out_dir: Path, pairs: int, fmt: str, report) -> tuple:
+    """Simulate and write each pair; ``(infos, T_camera_lidar, camera)`` of the last one."""
     infos = []
     T_camera_lidar = None
     camera = None
     for pair in range(pairs):
 
         def step(done, total, what, pair=pair):
-            # pairs have the same number of steps; report the fraction of all of them
-            if progress:
-                progress(pair * total + done, pairs * total, f"pair {pair + 1}/{pairs}: {what}")
+            # pairs have the same number of steps (the simulation's, then one for writing):
+            # report the fraction of all of them
+            report(
+                pair * (total + 1) + done, pairs * (total + 1), f"pair {pair + 1}/{pairs}: {what}"
+            )
 
         sequence = generate_sequence(config, pair=pair, progress=step)
         name = pair_name(pair)
@@ -236,10 +258,9 @@ def export_dataset(
         infos.append(_sequence_info(sequence, stamp_ns, written))
         T_camera_lidar = sequence.T_camera_lidar
         camera = sequence.camera
-    save_camera(out_dir / "camera.yaml", camera)
-    truth = ground_truth_dict(config, infos, T_camera_lidar)
-    write_text_atomic(truth_path, json.dumps(truth, indent=2, sort_keys=True) + "\n")
-    return truth
+        per_pair = len(sequence.scans) + 2  # the image, each scan, writing
+        report((pair + 1) * per_pair, pairs * per_pair, f"pair {pair + 1}/{pairs}: written")
+    return infos, T_camera_lidar, camera
 
 
 def _remove(path: Path) -> None:

@@ -1,0 +1,212 @@
+"""Progress displays: a bar on a terminal, throttled step lines in a log, nothing when quiet."""
+
+from __future__ import annotations
+
+import io
+import logging
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+import nbcalib.progress as progress_module
+from nbcalib.cli import main
+from nbcalib.progress import Progress
+
+
+class _Terminal(io.StringIO):
+    """A stream that says it is a terminal."""
+
+    def isatty(self) -> bool:
+        return True
+
+
+def _lines(caplog) -> list[str]:
+    return [r.getMessage() for r in caplog.records if r.name == "nbcalib.progress"]
+
+
+@pytest.fixture
+def clock(monkeypatch):
+    """A clock of the progress module that moves only when told (``clock.now += seconds``)."""
+    fake = SimpleNamespace(now=100.0)
+    fake.monotonic = lambda: fake.now
+    monkeypatch.setattr(progress_module, "time", fake)
+    return fake
+
+
+def test_not_a_terminal_writes_throttled_lines_through_logging(caplog, clock):
+    caplog.set_level(logging.INFO, logger="nbcalib")
+    stream = io.StringIO()
+    with Progress(20, "integrate", stream=stream, interval=5.0) as bar:
+        assert bar.mode == "lines"
+        for k in range(20):
+            clock.now += 1.0
+            bar.update(what=f"scan {k}")
+    lines = _lines(caplog)
+    # a line every 5 s (after 5, 10, 15 and 20 steps), then the last one
+    assert [line.split(",")[0] for line in lines] == [
+        "integrate: 5/20 scan 4",
+        "integrate: 10/20 scan 9",
+        "integrate: 15/20 scan 14",
+        "integrate: 20/20 scan 19",
+        "integrate: 20/20 scan 19",
+    ]
+    assert lines[1] == "integrate: 10/20 scan 9, 10.0 s, 10 s left"
+    assert lines[-1] == "integrate: 20/20 scan 19, in 20.0 s"
+    assert stream.getvalue() == "" and not any("\r" in line for line in lines)
+
+
+def test_a_quick_display_leaves_no_line(caplog, clock):
+    caplog.set_level(logging.INFO, logger="nbcalib")
+    with Progress(None, "refine", stream=io.StringIO()) as bar:
+        for _ in range(1000):
+            bar.update()
+        clock.now += 4.9
+    assert _lines(caplog) == []
+
+
+@pytest.fixture
+def every_step(monkeypatch):
+    """A step line for every step, and the last line however quick the display."""
+    monkeypatch.setattr(progress_module, "LINE_INTERVAL", 0.0)
+
+
+def test_a_failure_writes_no_last_line(caplog, every_step):
+    caplog.set_level(logging.INFO, logger="nbcalib")
+    with pytest.raises(RuntimeError), Progress(3, "x", stream=io.StringIO()) as bar:
+        bar.update()
+        raise RuntimeError
+    assert [line.split(",")[0] for line in _lines(caplog)] == ["x: 1/3"]
+
+
+@pytest.mark.parametrize("level", [logging.WARNING, logging.NOTSET])
+def test_quiet_shows_nothing(caplog, monkeypatch, level):
+    """``-q`` (the nbcalib logger at WARNING), or a library user who configured no logging."""
+    caplog.set_level(logging.WARNING)  # the root logger, as without any logging set up
+    caplog.set_level(level, logger="nbcalib")
+    terminal = _Terminal()
+    monkeypatch.setattr("sys.stderr", terminal)
+    with Progress(3, "synth") as bar:
+        assert bar.mode == "off"
+        for _ in range(3):
+            bar.update()
+    assert terminal.getvalue() == "" and _lines(caplog) == []
+
+
+def test_disabled_shows_nothing(caplog):
+    caplog.set_level(logging.INFO, logger="nbcalib")
+    terminal = _Terminal()
+    with Progress(3, "synth", enabled=False, stream=terminal) as bar:
+        bar.update(3)
+    assert terminal.getvalue() == "" and _lines(caplog) == []
+
+
+def test_a_terminal_gets_a_bar_and_log_lines_do_not_run_into_it(caplog, monkeypatch, clock):
+    caplog.set_level(logging.INFO, logger="nbcalib")
+    terminal = _Terminal()
+    monkeypatch.setattr("sys.stderr", terminal)
+    handler = logging.StreamHandler(terminal)
+    logger = logging.getLogger("nbcalib")
+    logger.addHandler(handler)
+    try:
+        with Progress(4, "synth") as bar:
+            assert bar.mode == "bar"
+            for k in range(4):
+                clock.now += 2.0
+                bar.update(what=f"scan {k}")
+                if k == 1:
+                    logging.getLogger("nbcalib.pipeline").info("hello")
+        assert handler.filters == []  # the bar's eraser leaves with the bar
+    finally:
+        logger.removeHandler(handler)
+    text = terminal.getvalue()
+    assert text.startswith("\rsynth [....................] 0/4")
+    assert "\rsynth [##########..........] 2/4 scan 1, 4.0 s, 4 s left" in text
+    assert "\r" + " " * 20 in text and "\rhello\n" in text  # erased before the log line
+    last = text.rsplit("\r", 1)[1]  # padded with blanks over the longer line before
+    assert (
+        last.endswith("\n") and last.rstrip() == "synth [####################] 4/4 scan 3, in 8.0 s"
+    )
+    assert _lines(caplog) == []  # a bar instead of step lines
+
+
+def test_a_quick_bar_is_erased(caplog):
+    caplog.set_level(logging.INFO, logger="nbcalib")
+    terminal = _Terminal()
+    with Progress(2, "integrate", stream=terminal) as bar:
+        bar.update(2)
+    text = terminal.getvalue()
+    assert text.startswith("\rintegrate [") and text.endswith("\r") and "\n" not in text
+    assert text.rsplit("\r", 2)[1].strip() == ""
+
+
+def test_bytes(caplog, clock, every_step):
+    caplog.set_level(logging.INFO, logger="nbcalib")
+    with Progress(None, "sha256", unit="B", stream=io.StringIO()) as bar:
+        clock.now += 2.0
+        bar.update(3_000_000, "scan.bin")
+    assert _lines(caplog) == [
+        "sha256: 3.0 MB scan.bin, 2.0 s, 2 MB/s",
+        "sha256: 3.0 MB scan.bin, in 2.0 s",
+    ]
+
+
+def test_integrate_progress_true_is_a_display_not_carriage_returns(caplog, capsys, every_step):
+    """The user test's finding: preprocess wrote ``\\r`` frames into a log."""
+    from nbcalib.preprocess.accumulate import integrate_static
+
+    caplog.set_level(logging.INFO, logger="nbcalib")
+    rng = np.random.default_rng(0)
+    scans = [rng.uniform(1.0, 5.0, size=(100, 3)) for _ in range(4)]
+    integrate_static(scans, voxel_size=0.05, progress=True)
+    assert "\r" not in capsys.readouterr().err
+    lines = _lines(caplog)
+    assert [line.split(",")[0] for line in lines[:-1]] == [
+        f"integrate: {k}/4 scans" for k in (1, 2, 3, 4)
+    ]
+    assert lines[-1].startswith("integrate: 4/4 scans, in ")
+
+
+SYNTH = ["--pairs", "1", "--lidar", "spinning16", "--duration", "0.2", "--image-size", "32x24"]
+
+
+def test_synth_command_in_a_log(tmp_path, capsys, every_step):
+    assert main(["synth", str(tmp_path / "s"), *SYNTH]) == 0
+    err = capsys.readouterr().err
+    assert "\r" not in err
+    steps = [line.split(",")[0] for line in err.splitlines()]
+    assert steps == [
+        "synth: 1/4 pair 1/1: image",
+        "synth: 2/4 pair 1/1: scans",
+        "synth: 3/4 pair 1/1: scans",
+        "synth: 4/4 pair 1/1: written",
+        "synth: 4/4 pair 1/1: written",  # the last line: "in ... s"
+    ]
+
+
+@pytest.mark.parametrize("where", ["before", "after"])
+def test_synth_command_quiet(tmp_path, capsys, every_step, where):
+    argv = ["synth", str(tmp_path / "s"), *SYNTH]
+    argv = ["-q", *argv] if where == "before" else [*argv, "-q"]
+    assert main(argv) == 0
+    captured = capsys.readouterr()
+    assert captured.err == "" and "nbcalib synth: 1 pair(s)" in captured.out
+
+
+def test_assess_and_refine_show_their_steps(caplog, every_step):
+    from nbcalib.registration.refine import RefineConfig, refine
+    from nbcalib.report import assess
+    from tests.test_report import make_pair
+
+    caplog.set_level(logging.INFO, logger="nbcalib")
+    pair = make_pair(1, n=2000, name="a")
+    assess([pair], np.eye(4), progress=True)
+    steps = [line.split(",")[0] for line in _lines(caplog)]
+    assert steps[:2] == ["quality: 1/7 Hessian of a", "quality: 2/7 NID curve tx"]
+    assert steps[-2:] == ["quality: 7/7 NID curve rz"] * 2
+    caplog.clear()
+    config = RefineConfig(pyramid_levels=0, max_outer=2, optimizer="lbfgs")
+    result = refine([pair], np.eye(4), config, progress=True)
+    lines = _lines(caplog)
+    assert len(lines) == len(result.history) + 1
+    assert lines[0].startswith("refine: 1 outer iterations (level 0, NID ")
