@@ -22,7 +22,8 @@ ignores: the virtual camera that rendered the LiDAR images (``virtual_camera``),
 (``inputs``), and for each stage what made its product (``made``: the config sections and
 inputs it used), from which :class:`nbcalib.pipeline.Calibrator` decides, product by product,
 what a resumed job can keep. A directory written by the reference toolbox has none of these:
-its products are kept as they are, and read as the reference means them.
+its products are kept as they are, and read as the reference means them (its virtual camera is
+recovered from its LiDAR image, :func:`reference_virtual_camera`).
 
 **Crash safety.** ``calib.json`` marks a finished preprocessing run. :meth:`WorkDir.prepare`
 removes an existing one before anything else is written, every product is written to a
@@ -34,8 +35,11 @@ last. A run that dies half-way therefore leaves a directory without ``calib.json
 from __future__ import annotations
 
 import json
+import logging
+import math
 import os
 import shutil
+import tempfile
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -54,10 +58,14 @@ __all__ = [
     "CONFIG_FILE",
     "PLAIN_FILES_NAME",
     "WorkDir",
+    "check_writable",
     "get_virtual_camera",
     "make_calib",
+    "reference_virtual_camera",
     "set_virtual_camera",
 ]
+
+log = logging.getLogger(__name__)
 
 #: File name of the job description.
 CALIB_FILE = "calib.json"
@@ -120,12 +128,41 @@ def set_virtual_camera(calib: CalibFile, virtual: VirtualCamera) -> None:
 
 
 def get_virtual_camera(calib: CalibFile) -> VirtualCamera | None:
-    """The virtual camera recorded by :func:`set_virtual_camera`, or None (reference-made dirs)."""
+    """The virtual camera of the work directory's LiDAR images.
+
+    The one recorded by :func:`set_virtual_camera`; in a directory the reference toolbox made
+    (no record), the reference's, recovered from the first data name's files
+    (:func:`reference_virtual_camera`), read only: nothing is written. None, with a warning
+    saying why, when that fails, and None for a ``calib`` that was not read from a file.
+    """
     from nbcalib.camera import CameraModel
 
     entry = calib.nbcalib.get(_VIRTUAL_CAMERA_KEY)
     if entry is None:
-        return None
+        if calib.path is None or not calib.bag_names:
+            return None
+        try:
+            virtual = reference_virtual_camera(WorkDir(calib.path.parent), calib.bag_names[0])
+        except InputError as exc:
+            log.warning(
+                "%s records no virtual camera and the reference toolbox's cannot be recovered "
+                "(%s): continuing without it",
+                calib.path,
+                exc,
+            )
+            return None
+        camera = virtual.camera
+        log.info(
+            "%s records no virtual camera: the reference toolbox's, recovered from %s: %s "
+            "%d x %d, intrinsics %s",
+            calib.path.name,
+            calib.bag_names[0],
+            camera.model,
+            camera.width,
+            camera.height,
+            np.round(camera.intrinsics, 3).tolist(),
+        )
+        return virtual
     try:
         camera = CameraModel.from_dict(entry["camera"])
         T = np.array(entry["T_vcam_lidar"], dtype=np.float64)
@@ -136,6 +173,114 @@ def get_virtual_camera(calib: CalibFile) -> VirtualCamera | None:
     except (KeyError, TypeError, ValueError) as exc:
         raise InputError(f"invalid nbcalib.{_VIRTUAL_CAMERA_KEY}: {exc}", calib.path) from None
     return VirtualCamera(camera, T, fov)
+
+
+def reference_virtual_camera(work: WorkDir, name: str) -> VirtualCamera:
+    """The virtual camera with which the reference toolbox rendered ``name``'s LiDAR image.
+
+    The reference does not store it, but its choice (reference_toolbox.md section 4) shows in
+    the image: a ``2H x H`` image is equirectangular (1920 x 960 there), a ``W x W`` image a
+    pinhole looking along LiDAR +x, centred (``cx = cy = W / 2`` under the reference's
+    truncating pixel convention, ``(W - 1) / 2`` in nbcalib's), whose ``fx = fy`` (from the
+    LiDAR's field of view there) is fitted here to the points the index map shows. Either way
+    the camera is :func:`~nbcalib.preprocess.lidar_image.make_virtual_camera`'s, and it must
+    put (almost) every point of the index map on its own pixel.
+
+    Parameters
+    ----------
+    work : WorkDir
+        The work directory.
+    name : str
+        The data name whose ``<name>_lidar_indices.png`` and ``<name>.ply`` are read.
+
+    Returns
+    -------
+    VirtualCamera
+        ``fov_deg`` is the field of view the reference used for a pinhole, else None.
+
+    Raises
+    ------
+    InputError
+        The files cannot be read, or the image is not one the reference renders; names the
+        index map.
+    """
+    from nbcalib.io.ply import read_ply_fields
+    from nbcalib.preprocess.lidar_image import (
+        PINHOLE_MAX_FOV_DEG,
+        R_VCAM_LIDAR_PINHOLE,
+        make_virtual_camera,
+    )
+    from nbcalib.transforms import transform_points
+
+    path = work.lidar_index_path(name)
+    index = read_index_map(path)
+    height, width = index.shape
+    fields = read_ply_fields(work.cloud_path(name))
+    if not all(k in fields for k in "xyz"):
+        raise InputError("the cloud lacks x, y, z", work.cloud_path(name))
+    v, u = np.nonzero(index >= 0)
+    if index.max(initial=-1) >= len(fields["x"]):
+        raise InputError(
+            f"refers to point {index.max()}, {work.cloud_path(name).name} has {len(fields['x'])}",
+            path,
+        )
+    if len(u) < 10:
+        raise InputError(f"shows only {len(u)} points", path)
+    points = np.column_stack([fields[k][index[v, u]] for k in "xyz"]).astype(np.float64)
+    uv = np.column_stack([u, v]).astype(np.float64)
+    fov = None
+    if width == 2 * height:
+        camera, T_vcam_lidar = make_virtual_camera(math.pi, equirectangular_size=(width, height))
+    elif width == height:
+        p = points @ R_VCAM_LIDAR_PINHOLE.T
+        ahead = p[:, 2] > 0
+        ab = p[ahead, :2] / p[ahead, 2:]
+        # fx = fy by least squares on u - c = fx a, v - c = fx b
+        spread = float(np.sum(ab * ab))
+        fx = float(np.sum(ab * (uv[ahead] - (width - 1) / 2.0))) / spread if spread else 0.0
+        fov = 2.0 * math.atan(width / (2.0 * fx)) if fx > 0.0 else math.pi
+        if math.degrees(fov) >= PINHOLE_MAX_FOV_DEG:
+            raise InputError("a square LiDAR image, but no pinhole looking along +x shows it", path)
+        camera, T_vcam_lidar = make_virtual_camera(fov, pinhole_size=width)
+    else:
+        raise InputError(
+            f"a {width} x {height} LiDAR image: the reference toolbox renders 1024 x 1024 "
+            "(pinhole) or 1920 x 960 (equirectangular)",
+            path,
+        )
+    projected, valid = camera.project(transform_points(T_vcam_lidar, points))
+    on_pixel = valid & np.all(np.floor(projected + 0.5) == uv, axis=1)
+    if np.mean(on_pixel) < 0.99:
+        raise InputError(
+            f"only {np.mean(on_pixel):.0%} of its points lie on their pixels through the "
+            f"reference toolbox's {camera.model} virtual camera",
+            path,
+        )
+    return VirtualCamera(camera, T_vcam_lidar, None if fov is None else math.degrees(fov))
+
+
+def check_writable(path: str | os.PathLike) -> None:
+    """Refuse, before any work is done, a folder that cannot be written or made.
+
+    ``path`` need not exist: its nearest existing ancestor must be a folder in which a file can
+    be created (a probe file is made and removed, which also catches read-only mounts).
+
+    Raises
+    ------
+    InputError
+        Naming the folder (or the file in the way) and the reason.
+    """
+    target = Path(path)
+    while not target.exists() and target.parent != target:
+        target = target.parent
+    if not target.is_dir():
+        raise InputError("is a file, not a folder: cannot write into it", target)
+    try:
+        with tempfile.TemporaryFile(dir=target):
+            pass
+    except OSError as exc:
+        reason = (exc.strerror or type(exc).__name__).lower()
+        raise InputError(f"cannot write here ({reason})", target) from None
 
 
 # --------------------------------------------------------------------------------------------
@@ -258,6 +403,10 @@ class WorkDir:
             raise InputError("meta.bag_names is empty: nothing to use", self.calib_path)
         return calib
 
+    def check_writable(self) -> None:
+        """:func:`check_writable` for this directory (it need not exist yet)."""
+        check_writable(self.path)
+
     # ---------------------------------------------------------------- preprocessing
     def prepare(self) -> None:
         """Create the directory and remove what a new preprocessing run makes stale.
@@ -360,11 +509,12 @@ class WorkDir:
         Writes ``<name>_correspondences.json`` (nbcalib's product: every correspondence, its
         camera pixel, cloud row and confidence), ``<name>_matches.json`` (the reference's
         format: the correspondences the stored LiDAR image shows) and, with ``draw``,
-        ``<name>_matches.png``.
+        ``<name>_matches.png`` (:func:`~nbcalib.matching.draw.draw_pair_matches`: drawn on
+        the LiDAR image that was matched).
         """
         from nbcalib.io._files import write_text_atomic
         from nbcalib.io.image import write_png
-        from nbcalib.matching.draw import draw_matches
+        from nbcalib.matching.draw import draw_pair_matches
         from nbcalib.matching.matches import write_matches_json
 
         corr = found.correspondences
@@ -382,7 +532,7 @@ class WorkDir:
         write_matches_json(self.matches_path(pair.name), found.matches)
         picture = self.matches_picture_path(pair.name)
         if draw:
-            write_png(picture, draw_matches(pair.image, pair.lidar_image.intensity, found.matches))
+            write_png(picture, draw_pair_matches(pair.image, found, pair.lidar_image.intensity))
         else:
             picture.unlink(missing_ok=True)
 

@@ -19,6 +19,7 @@ map there) finds exactly these points.
 
 from __future__ import annotations
 
+import logging
 import os
 import time
 from dataclasses import dataclass, replace
@@ -31,6 +32,8 @@ from nbcalib.matching.correspondences import Correspondences, correspondences_fr
 from nbcalib.matching.matches import Matches
 
 __all__ = ["PairMatches", "find_correspondences", "reference_matches"]
+
+log = logging.getLogger(__name__)
 
 
 @dataclass(frozen=True, eq=False)
@@ -103,8 +106,11 @@ def reference_matches(
     """Correspondences as keypoint matches of the stored LiDAR image (reference file format).
 
     Each correspondence's LiDAR keypoint is the pixel ``(u, v)`` (integers) of ``index_map``
-    that holds its cloud row; correspondences whose point the LiDAR image does not show
-    (hidden behind a nearer point, or an explicit 3-D point) are left out.
+    that holds its cloud row, so that a reader that truncates the keypoint and looks the index
+    map up there (the reference's ``initial_guess_auto``) finds exactly that point.
+    Correspondences whose point the LiDAR image does not show (hidden behind a nearer point,
+    outside the virtual camera, or an explicit 3-D point) are left out (they stay in nbcalib's
+    ``<name>_correspondences.json``).
 
     Parameters
     ----------
@@ -154,6 +160,7 @@ def find_correspondences(
     T_camera_lidar_prior=None,
     seed: int = 0,
     model_dir: str | os.PathLike | None = None,
+    progress: bool = False,
 ) -> PairMatches:
     """Match one pair's camera image with its LiDAR data (module docstring).
 
@@ -170,13 +177,15 @@ def find_correspondences(
         match_views`).
     virtual_camera : VirtualCamera, optional
         The camera of the stored LiDAR image: with ``views == 0`` its resolution sets the
-        camera image's scale (else ``config.camera_scale``, else 1).
+        camera image's scale (else ``config.camera_scale``, else 1, with a warning).
     T_camera_lidar_prior : array_like of shape (4, 4), optional
         A rough extrinsic: views around it instead of the heading sweep.
     seed : int, optional
         RANSAC seed of the views.
     model_dir : str or os.PathLike, optional
         Exported models.
+    progress : bool, optional
+        Show the views matched (:class:`nbcalib.progress.Progress`).
 
     Returns
     -------
@@ -184,6 +193,7 @@ def find_correspondences(
     """
     from nbcalib.matching.match import camera_scale_for, match_images, resolve_matcher
     from nbcalib.matching.multiview import match_views
+    from nbcalib.progress import Progress
 
     cfg = config or MatchConfig()
     t0 = time.perf_counter()
@@ -197,7 +207,14 @@ def find_correspondences(
             for ppd in cfg.retry_pixels_per_degree
         ]
         best = None
-        for attempt in settings:
+        display = Progress(label=f"find-matches {pair.name}", enabled=progress, unit="")
+        for i, attempt in enumerate(settings):
+            offset = display.done
+
+            def view_done(k, n, i=i, offset=offset):
+                display.total = offset + n  # a retry's views are added as it starts
+                display.update(what=f"views (attempt {i + 1})")
+
             found = match_views(
                 camera,
                 pair.image,
@@ -210,6 +227,7 @@ def find_correspondences(
                 seed=seed,
                 name=pair.name,
                 model_dir=model_dir,
+                progress=view_done,
             )
             ok, support = _guess_passes(camera, found.correspondences, guess_config, seed)
             attempts.append(
@@ -225,6 +243,7 @@ def find_correspondences(
                 best = ((ok, support), len(attempts) - 1, found)
             if ok:
                 break
+        display.close()
         _, kept, views = best
         corr = views.correspondences
         info = {
@@ -247,6 +266,12 @@ def find_correspondences(
         scale = cfg.camera_scale
         if scale is None and virtual_camera is not None:
             scale = camera_scale_for(camera, virtual_camera.camera)
+        elif scale is None:
+            log.warning(
+                "%s: the camera of the stored LiDAR image is unknown: matching it with the "
+                "camera image at its own scale (--camera-scale sets one)",
+                pair.name,
+            )
         m = match_images(
             pair.image,
             pair.lidar_image.intensity,

@@ -5,7 +5,7 @@ tool's ``initial_guess`` reads the other's matches::
 
     {
       "kpts0": [x0, y0, x1, y1, ...],   camera keypoints, pixels
-      "kpts1": [x0, y0, ...],           LiDAR-image keypoints, pixels
+      "kpts1": [x0, y0, ...],           LiDAR-image keypoints, pixels (nbcalib: whole pixels)
       "matches": [j0, j1, ...],         one per camera keypoint: index into kpts1, or -1
       "confidence": [c0, c1, ...],      one per camera keypoint
       "nbcalib": {"matcher": "..."}     nbcalib's addition (the reference ignores it)
@@ -99,12 +99,21 @@ class Matches:
         )
 
 
+def _numbers(kpts: np.ndarray) -> list:
+    """Flat keypoint coordinates; whole pixels as JSON integers (the reference reads ints)."""
+    return [int(x) if x.is_integer() else float(x) for x in kpts.reshape(-1).tolist()]
+
+
 def write_matches_json(path: str | os.PathLike, matches: Matches) -> None:
-    """Write ``<name>_matches.json`` (reference format, module docstring), atomically."""
+    """Write ``<name>_matches.json`` (reference format, module docstring), atomically.
+
+    Whole-pixel keypoints (nbcalib's LiDAR keypoints, :func:`~nbcalib.matching.find.
+    reference_matches`) are written as integers.
+    """
     path = Path(path)
     doc = {
-        "kpts0": [float(x) for x in matches.kpts_camera.reshape(-1)],
-        "kpts1": [float(x) for x in matches.kpts_lidar.reshape(-1)],
+        "kpts0": _numbers(matches.kpts_camera),
+        "kpts1": _numbers(matches.kpts_lidar),
         "matches": [int(x) for x in matches.matches],
         "confidence": [float(x) for x in matches.confidence],
         "nbcalib": {"matcher": matches.matcher, **matches.info},
