@@ -251,6 +251,21 @@ def test_translation_ransac_recovers_the_translation_for_a_known_rotation():
     assert np.array_equal(kept, start)
 
 
+def test_translation_ransac_equals_its_one_at_a_time_reference():
+    from nbcalib.initial_guess import translation_ransac
+    from nbcalib.reference.ransac import translation_ransac as reference
+
+    camera, truth, c = _far_street(4)
+    bearings = camera.unproject(c.uv_camera)
+    for seed, start in ((0, None), (3, _pushed_along_axis(truth, 0.8)[:3, 3])):
+        R = _pushed_along_axis(truth, 0.0, 0.3)[:3, :3]  # a slightly wrong rotation: ties differ
+        args = (camera, R, c.uv_camera, c.points_lidar, bearings)
+        fast = translation_ransac(*args, seed=seed, t_start=start, iterations=300)
+        slow = reference(*args, seed=seed, t_start=start, iterations=300)
+        assert fast[1] == slow[1]
+        np.testing.assert_allclose(fast[0], slow[0], atol=1e-9)
+
+
 def test_polish_undoes_a_pull_along_the_weak_direction():
     """LM over all correspondences can end metres off along a weakly constrained direction
     (docs/BENCHMARKS.md: 1.3 m on a street pair); from such a pose the polish step gets back

@@ -295,11 +295,42 @@ def _refine_from(
     return T_start, result
 
 
-def _inlier_count(camera, R, t, uv, points, threshold) -> int:
-    """Correspondences that ``(R, t)`` reprojects within ``threshold`` pixels."""
-    proj, valid = camera.project(points @ R.T + t)
-    error = np.linalg.norm(proj - uv, axis=1)
-    return int(np.count_nonzero(valid & (error < threshold)))
+#: Translation hypotheses scored per call of the projection (memory: 64 x M points).
+_HYPOTHESES_PER_BATCH = 64
+
+
+def _inlier_counts(camera, R, translations, uv, points, threshold) -> np.ndarray:
+    """Per translation ``t`` (rows): correspondences ``(R, t)`` reprojects within ``threshold``."""
+    ts = np.asarray(translations, dtype=np.float64).reshape(-1, 3)
+    q = points @ R.T
+    proj, valid = camera.project((q[None, :, :] + ts[:, None, :]).reshape(-1, 3))
+    error = np.linalg.norm(proj - np.tile(uv, (len(ts), 1)), axis=1)
+    return np.count_nonzero((valid & (error < threshold)).reshape(len(ts), -1), axis=1)
+
+
+def _translations_of_pairs(R, bearings, points) -> np.ndarray:
+    """:func:`translation_from_bearings` of many 2-correspondence samples at once.
+
+    ``bearings`` and ``points`` are (S, 2, 3); the same minimum-norm least squares (singular
+    values below ``1e-9`` of the largest dropped, as ``lstsq`` with ``rcond=1e-9``), by a
+    batched SVD. Non-finite solutions become zero, as there.
+    """
+    b = bearings
+    scale = 1.0 / np.linalg.norm(points, axis=2)  # (S, 2)
+    q = points @ R.T
+    bx = np.zeros((*b.shape[:2], 3, 3))
+    bx[..., 0, 1], bx[..., 0, 2] = -b[..., 2], b[..., 1]
+    bx[..., 1, 0], bx[..., 1, 2] = b[..., 2], -b[..., 0]
+    bx[..., 2, 0], bx[..., 2, 1] = -b[..., 1], b[..., 0]
+    A = (bx * scale[..., None, None]).reshape(len(b), 6, 3)
+    rhs = (-np.cross(b, q) * scale[..., None]).reshape(len(b), 6)
+    U, S, Vt = np.linalg.svd(A, full_matrices=False)
+    cutoff = 1e-9 * S.max(axis=1, keepdims=True)
+    inverse = np.where(S > cutoff, 1.0 / np.where(S > 0, S, 1.0), 0.0)
+    coefficients = inverse * np.einsum("sij,si->sj", U, rhs)
+    t = np.einsum("sji,sj->si", Vt, coefficients)
+    t[~np.all(np.isfinite(t), axis=1)] = 0.0
+    return t
 
 
 def translation_ransac(
@@ -320,7 +351,9 @@ def translation_ransac(
     Two correspondences fix ``t`` once ``R`` is known (:func:`translation_from_bearings` of the
     pair); each random pair is a hypothesis, scored by its inliers (reprojection error below
     ``threshold`` pixels) over all correspondences. ``t_start`` (if given) is scored first and
-    kept unless a hypothesis explains strictly more.
+    kept unless a hypothesis explains strictly more; among hypotheses that explain the most,
+    the first drawn wins. The hypotheses are solved and scored in batches;
+    :func:`nbcalib.reference.ransac.translation_ransac` is the same, one hypothesis at a time.
 
     Parameters
     ----------
@@ -355,18 +388,20 @@ def translation_ransac(
     points = np.asarray(points_lidar, dtype=np.float64)
     bearings = np.asarray(bearings_camera, dtype=np.float64)
     best_t = np.zeros(3) if t_start is None else np.asarray(t_start, dtype=np.float64)
-    best_n = _inlier_count(camera, R, best_t, uv, points, threshold)
-    if len(uv) < 2:
+    best_n = int(_inlier_counts(camera, R, best_t, uv, points, threshold)[0])
+    iterations = operator.index(iterations)
+    if len(uv) < 2 or iterations <= 0:
         return best_t, best_n
     rng = np.random.default_rng(seed)
-    for _ in range(operator.index(iterations)):
-        j = rng.choice(len(uv), size=2, replace=False)
-        t = translation_from_bearings(R, bearings[j], points[j])
-        if not np.linalg.norm(t) <= max_norm:
-            continue
-        n = _inlier_count(camera, R, t, uv, points, threshold)
-        if n > best_n:
-            best_t, best_n = t, n
+    samples = np.array([rng.choice(len(uv), size=2, replace=False) for _ in range(iterations)])
+    ts = _translations_of_pairs(R, bearings[samples], points[samples])
+    ts = ts[np.linalg.norm(ts, axis=1) <= max_norm]
+    for k in range(0, len(ts), _HYPOTHESES_PER_BATCH):
+        batch = ts[k : k + _HYPOTHESES_PER_BATCH]
+        counts = _inlier_counts(camera, R, batch, uv, points, threshold)
+        j = int(np.argmax(counts))  # the first of the most
+        if counts[j] > best_n:
+            best_t, best_n = batch[j].copy(), int(counts[j])
     return best_t, best_n
 
 

@@ -22,6 +22,7 @@ __all__ = [
     "rotation_from_pair",
     "rotation_ransac",
     "sample_pair",
+    "translation_ransac",
 ]
 
 _MASK64 = (1 << 64) - 1
@@ -133,3 +134,30 @@ def rotation_ransac(
         if count > best_count:  # strict: the lowest iteration wins a tie
             best_iteration, best_count, best_R = i, count, R
     return best_iteration, best_count, best_R
+
+
+def translation_ransac(
+    camera, R, uv, points, bearings, *, threshold=5.0, iterations=1000, seed=0, t_start=None,
+    max_norm=5.0,
+):  # fmt: skip
+    """:func:`nbcalib.initial_guess.estimate.translation_ransac`, one hypothesis at a time."""
+    from nbcalib.initial_guess.estimate import translation_from_bearings
+
+    def inliers(t):
+        proj, valid = camera.project(points @ R.T + t)
+        return int(np.count_nonzero(valid & (np.linalg.norm(proj - uv, axis=1) < threshold)))
+
+    best_t = np.zeros(3) if t_start is None else np.asarray(t_start, dtype=np.float64)
+    best_n = inliers(best_t)
+    if len(uv) < 2:
+        return best_t, best_n
+    rng = np.random.default_rng(seed)
+    for _ in range(iterations):
+        j = rng.choice(len(uv), size=2, replace=False)
+        t = translation_from_bearings(R, bearings[j], points[j])
+        if not np.linalg.norm(t) <= max_norm:
+            continue
+        n = inliers(t)
+        if n > best_n:
+            best_t, best_n = t, n
+    return best_t, best_n
