@@ -18,6 +18,7 @@ import sys
 import traceback
 
 from nbcalib import __version__
+from nbcalib.commands._args import add_verbosity_arguments
 from nbcalib.errors import InputError
 
 #: Command modules in the order ``--help`` lists them (the order of the method's stages).
@@ -78,6 +79,8 @@ def build_parser() -> argparse.ArgumentParser:
     for name in COMMAND_MODULES:
         module = importlib.import_module(f"nbcalib.commands.{name}")
         sub_parser = module.add_parser(sub, formatter_class=_Formatter)
+        if "--quiet" not in sub_parser._option_string_actions:  # -v / -q after the command too
+            add_verbosity_arguments(sub_parser)
         sub_parser.set_defaults(run=module.run)
     return parser
 
@@ -110,6 +113,23 @@ def join_negative_values(argv: list[str]) -> list[str]:
     return out
 
 
+def _parse(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.Namespace:
+    """Parse, taking positional arguments after options as inputs too.
+
+    argparse stops filling a ``nargs="*"`` positional at the first option, so
+    ``preprocess a.pcd --image b.png work/`` would leave ``work/`` unrecognised. For commands
+    with ``INPUT... WORKDIR``, such trailing words join the inputs (WORKDIR is the last one).
+    """
+    args, extras = parser.parse_known_args(argv)
+    words = [w for w in extras if not w.startswith("-")]
+    if words and isinstance(getattr(args, "inputs", None), list):
+        args.inputs += words
+        extras = [w for w in extras if w.startswith("-")]
+    if extras:
+        parser.error(f"unrecognized arguments: {' '.join(extras)}")
+    return args
+
+
 def _log_to_stderr(level: int) -> None:
     """Stage progress (the ``nbcalib`` loggers) to this command's stderr, one line each."""
     logger = logging.getLogger("nbcalib")
@@ -126,7 +146,7 @@ def _log_to_stderr(level: int) -> None:
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
     parser = build_parser()
-    args = parser.parse_args(join_negative_values(sys.argv[1:] if argv is None else list(argv)))
+    args = _parse(parser, join_negative_values(sys.argv[1:] if argv is None else list(argv)))
     if args.command is None:
         parser.print_help()
         return 2

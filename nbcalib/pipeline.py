@@ -155,13 +155,17 @@ class Calibrator:
             skip.setdefault("initial-guess", f"starting from {given.source}")
         elif manual is not None:
             skip.setdefault("find-matches", "--manual")
+        if self.work is not None:
+            self.work.check_writable()
         plan = plan_stages(
             self, only=only, until=until, redo_from=redo_from, overwrite=overwrite, skip=skip
         )
         for k, (stage, runs, reason) in enumerate(plan):
             header = f"[{k + 1}/{len(plan)}] {stage}"
             if not runs:
-                log.info("%s: skipped (%s)", header, reason)
+                # a stage this job already ran, or one the caller stopped before, needs no line
+                said = stage in self.ran or reason.startswith("--until")
+                log.log(logging.DEBUG if said else logging.INFO, "%s: skipped (%s)", header, reason)
                 self.skipped.append(stage)
                 continue
             if self._guess_failed and stage == "initial-guess":
@@ -273,7 +277,9 @@ class Calibrator:
         camera, cfg = self._camera(), self.config
         prior = self._prior.T_camera_lidar if self._prior is not None else None
         self.matches = {}
-        for pair in self._pairs():
+        pairs = self._pairs()
+        for k, pair in enumerate(pairs):
+            log.info("    [%d/%d] %s", k + 1, len(pairs), pair.name)
             found = find_correspondences(
                 camera,
                 pair,
@@ -283,6 +289,7 @@ class Calibrator:
                 T_camera_lidar_prior=prior,
                 seed=cfg.seed,
                 model_dir=self.model_dir,
+                progress=True,
             )
             _detail(found.summary())
             self.matches[pair.name] = found
@@ -380,7 +387,13 @@ class Calibrator:
             start.source,
         )
 
+        levels: list[int] = []
+
         def progress(i, step):
+            if step.level not in levels:  # a new level's NID is not comparable with the last
+                levels.append(step.level)
+                what = "full resolution" if step.level == 0 else f"1/{2**step.level} resolution"
+                _detail(f"pyramid level {step.level} ({what}):")
             _detail(
                 f"outer {i + 1} (level {step.level}): NID {step.nid_start:.5f} -> {step.nid:.5f}"
                 f"  {step.iterations} it, {step.evaluations} evals, moved "
@@ -389,7 +402,11 @@ class Calibrator:
             )
 
         t0 = time.perf_counter()
-        self.refinement = refine(pairs, start.T_camera_lidar, cfg, progress=progress)
+        try:
+            self.refinement = refine(pairs, start.T_camera_lidar, cfg, progress=progress)
+        except InputError as exc:
+            where = None if self.work is None else self.work.calib_path
+            raise InputError(f"{exc} (start: {start.source})", where) from None
         self.start = start
         self._forget_after("calibrate")
         calib = self._calib()
@@ -442,6 +459,7 @@ class Calibrator:
             converged=converged,
             assess_config=self.config.assess,
             start_uncertainty=None if start is None else start.uncertainty,
+            progress=True,
         )
         _detail(f"verdict: {self.quality.verdict}")
         if self.work is None:
@@ -459,6 +477,7 @@ class Calibrator:
             None if start is None else start.T_camera_lidar,
             self.config.refine,
             None if start is None else start.source,
+            progress=True,
         )
         calib = self._calib()
         info = calib.nbcalib.get("calibration")

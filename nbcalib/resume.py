@@ -102,7 +102,7 @@ def _done(calibrator, calib, stage: str) -> tuple[bool, str]:
         if any(_present(calibrator, calib, s) for s in later if s != "report"):
             return True, "done, made without nbcalib"
     if not _present(calibrator, calib, stage):
-        return False, ""
+        return False, "not made yet"
     if not managed:
         return True, "done, made without nbcalib"
     made = calibrator._made if calibrator.work is None else calib.nbcalib["made"]
@@ -143,6 +143,17 @@ def plan_stages(
     work = calibrator.work
     calib = work.read_calib() if work is not None and work.is_complete() else None
     if only is not None:
+        if (
+            not overwrite
+            and only != "report"
+            and calib is not None
+            and calib.has_result(FINAL_STAGE)
+        ):
+            raise InputError(
+                f"holds a finished result (T_lidar_camera), which {only} would replace; use "
+                "--force to recompute it",
+                work.calib_path,
+            )
         return [(only, True, "")]
     skip = dict(skip or {})
     plan: list[tuple[str, bool, str]] = []
@@ -167,7 +178,7 @@ def plan_stages(
         if first is not None:
             raise InputError(
                 f"holds a finished result (T_lidar_camera) and {first[0]} would run again "
-                f"({first[1] or 'not done'}); use --force to recompute it, or --from STAGE",
+                f"({first[1]}); use --force to recompute it, or --from STAGE",
                 work.calib_path,
             )
     return plan

@@ -108,7 +108,7 @@ try:
     else:
         plotter.show()
 except ImportError:
-    print("pyvista is not installed: pip install 'nbcalib[viz]'")
+    print("pyvista is not installed: pip install 'nbcalib[notebooks]'")
 
 # %% [markdown]
 # ## From the command line

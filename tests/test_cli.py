@@ -86,7 +86,7 @@ def test_a_file_where_a_folder_should_be_is_a_user_error(tmp_path, capsys):
     assert main(["synth", str(tmp_path / "file" / "out"), "--pairs", "1"]) == 2
     err = capsys.readouterr().err
     assert "Traceback" not in err and len(err.strip().splitlines()) == 1
-    assert "file" in err and "not a directory" in err
+    assert "file" in err and "not a folder" in err
 
 
 def test_no_retries_switches_the_matching_retries_off():

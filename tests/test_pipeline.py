@@ -75,7 +75,8 @@ def test_a_stage_run_by_hand_gives_the_pipelines_result(demo, tmp_path):
     summary = json.loads((demo / "demo_summary.json").read_text())
     init = summary["start_T_lidar_camera"]
     extra = ["--init=" + ",".join(repr(v) for v in init)] if init else []
-    assert main(["-q", "calibrate", str(work), *extra]) == 0
+    assert main(["-q", "calibrate", str(work), *extra]) == 2  # not over a result by accident
+    assert main(["-q", "calibrate", str(work), *extra, "--force"]) == 0
     after = read_calib_json(work / "calib.json")
     assert after.results["T_lidar_camera"] == before.results["T_lidar_camera"]
     # the report described the old result: it is gone, not stale

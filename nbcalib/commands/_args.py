@@ -12,8 +12,10 @@ from pathlib import Path
 from nbcalib.errors import InputError
 
 __all__ = [
+    "add_force_argument",
     "add_input_arguments",
     "add_verbosity_arguments",
+    "check_model_dir",
     "input_spec",
     "parse_pose",
     "parse_start",
@@ -46,6 +48,18 @@ def add_input_arguments(parser: argparse.ArgumentParser) -> None:
         elif option.flag in ("--every", "--pair-count"):
             kwargs["type"] = _whole
         group.add_argument(option.flag, **kwargs)
+
+
+#: Help of a stage command's ``--force``.
+FORCE_HELP = (
+    "run even when WORKDIR holds a finished result (T_lidar_camera): it goes, with the report "
+    "and exports made from it"
+)
+
+
+def add_force_argument(parser, help: str = FORCE_HELP) -> None:
+    """``--force``: a stage command may replace a finished result (as ``nbcalib run --force``)."""
+    parser.add_argument("--force", action="store_true", help=help)
 
 
 def _whole(text: str) -> int:
@@ -201,6 +215,12 @@ INIT_UNCERTAINTY_HELP = (
 )
 
 
+def check_model_dir(path) -> None:
+    """A ``--model-dir`` the user gave must be a folder (None: not given)."""
+    if path is not None and not Path(path).is_dir():
+        raise InputError("--model-dir: no such folder", path)
+
+
 def stage_calibrator(args: argparse.Namespace, own: tuple[str, ...]):
     """The :class:`~nbcalib.pipeline.Calibrator` of a stage command on a preprocessed WORKDIR.
 
@@ -223,7 +243,7 @@ def stage_calibrator(args: argparse.Namespace, own: tuple[str, ...]):
         config_from_record(calib.nbcalib.get("config")),
         **{name: getattr(defaults, name) for name in own},
     )
-    model_dir = getattr(args, "model_dir", None) or (calib.nbcalib.get("run") or {}).get(
-        "model_dir"
-    )
+    model_dir = getattr(args, "model_dir", None)
+    check_model_dir(model_dir)
+    model_dir = model_dir or (calib.nbcalib.get("run") or {}).get("model_dir")
     return Calibrator(build_config(args, base=base), workdir=work, model_dir=model_dir)

@@ -25,6 +25,7 @@ examples:
   nbcalib calibrate work/ --pyramid-levels 0                # full resolution only (reference)
   nbcalib calibrate work/ --trust-translation 0.1 --trust-rotation 2   # stay within 10 cm / 2 deg
   nbcalib calibrate work/ --init 0.1,-0.05,0.02,0.5,-0.5,0.5,0.5 --init-uncertainty 0.05 1
+  nbcalib calibrate work/ --force --bins 8                  # replace a finished result
 
 --init takes T_lidar_camera as x,y,z,qx,qy,qz,qw (metres, quaternion xyzw), the calib.json layout;
 settings not given take their defaults. The run never leaves the trust region around its start
@@ -35,7 +36,7 @@ flagged, and the report calls it suspect.
 
 def add_parser(subparsers, formatter_class) -> argparse.ArgumentParser:
     """Register ``calibrate``."""
-    from nbcalib.commands._args import INIT_UNCERTAINTY_HELP
+    from nbcalib.commands._args import INIT_UNCERTAINTY_HELP, add_force_argument
     from nbcalib.commands._options import REFINE, add_options
 
     p = subparsers.add_parser(
@@ -49,6 +50,7 @@ def add_parser(subparsers, formatter_class) -> argparse.ArgumentParser:
     p.add_argument("--init", metavar="X,Y,Z,QX,QY,QZ,QW", help="start from this T_lidar_camera")
     p.add_argument("--init-uncertainty", nargs=2, metavar=("M", "DEG"), help=INIT_UNCERTAINTY_HELP)
     add_options(p.add_argument_group("fine registration"), REFINE)
+    add_force_argument(p)
     return p
 
 
@@ -62,11 +64,13 @@ def run(args) -> int:
     init = parse_start(args.init, args.init_uncertainty)
     calibrator = stage_calibrator(args, ("refine",))
     t0 = time.perf_counter()
-    calibrator.run(init=init, only="calibrate")
+    calibrator.run(init=init, only="calibrate", overwrite=args.force)
     result = calibrator.refinement
     start = calibrator.start
     dt, dr = pose_error(invert_T(result.T_camera_lidar), invert_T(start.T_camera_lidar))
     values = calibrator.work.read_calib().results["T_lidar_camera"]
+    # NID values of other pyramid levels and visibility sets are not comparable with the last
+    last = result.history[-1]
     stopped = "converged" if result.converged else result.stopped or "stopped at --max-outer"
     edge = ""
     if result.at_trust_boundary:
@@ -76,7 +80,7 @@ def run(args) -> int:
         )
     print(
         f"T_lidar_camera = [{', '.join(f'{v:.6f}' for v in values)}]  (x y z qx qy qz qw)\n"
-        f"NID {result.history[0].nid_start:.5f} -> {result.nid:.5f}, moved "
+        f"NID {last.nid_start:.5f} -> {last.nid:.5f} (last outer iteration), moved "
         f"{100 * dt:.2f} cm {dr:.3f} deg from the start, {len(result.history)} outer iterations "
         f"({stopped}){edge}, {time.perf_counter() - t0:.1f} s; written to "
         f"{calibrator.work.calib_path}"

@@ -226,7 +226,6 @@ def run(args: argparse.Namespace) -> int:
     )
     verdict = "within" if met else "NOT within"
     print(
-        f"{100 * final['translation_error_m']:.2f} cm, {final['rotation_error_deg']:.3f} deg: "
         f"{verdict} the synthetic targets ({100 * TARGET_TRANSLATION_M:.0f} cm, "
         f"{TARGET_ROTATION_DEG} deg)"
         + ("" if usable else "; started from a perturbed ground truth, not from a guess")

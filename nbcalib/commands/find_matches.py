@@ -45,6 +45,7 @@ examples:
 
 def add_parser(subparsers, formatter_class=argparse.HelpFormatter) -> argparse.ArgumentParser:
     """Register ``find-matches`` on the ``nbcalib`` subcommand parser."""
+    from nbcalib.commands._args import add_force_argument
     from nbcalib.commands._options import MATCHING, add_options
 
     parser = subparsers.add_parser(
@@ -73,6 +74,7 @@ def add_parser(subparsers, formatter_class=argparse.HelpFormatter) -> argparse.A
     parser.add_argument(
         "--no-prior", action="store_true", help="ignore init_T_lidar_camera of calib.json"
     )
+    add_force_argument(parser)
     return parser
 
 
@@ -90,7 +92,7 @@ def run(args: argparse.Namespace) -> int:
     elif not args.no_prior and calib.has_result(MANUAL_STAGE):
         log.info("views around %s of calib.json (--no-prior ignores it)", MANUAL_STAGE)
         prior = Start.from_matrix(calib.get_T_camera_lidar(MANUAL_STAGE), MANUAL_STAGE)
-    calibrator.run(prior=prior, only="find-matches")
+    calibrator.run(prior=prior, only="find-matches", overwrite=args.force)
     for found in calibrator.matches.values():
         print(found.summary())
     return 0

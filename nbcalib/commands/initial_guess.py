@@ -47,6 +47,7 @@ manual file:
 
 def add_parser(subparsers, formatter_class=argparse.HelpFormatter) -> argparse.ArgumentParser:
     """Register ``initial-guess`` on the ``nbcalib`` subcommand parser."""
+    from nbcalib.commands._args import add_force_argument
     from nbcalib.commands._options import INITIAL_GUESS, MATCHING, add_options
 
     p = subparsers.add_parser(
@@ -68,8 +69,10 @@ def add_parser(subparsers, formatter_class=argparse.HelpFormatter) -> argparse.A
     group = p.add_argument_group("initial guess")
     add_options(group, INITIAL_GUESS)
     add_options(group, [o for o in MATCHING if o.flag == "--search-radius"])
-    p.add_argument(
-        "--force", action="store_true", help="write the guess even when it has too few inliers"
+    add_force_argument(
+        p,
+        "write the guess even when it fails its test, and run even when WORKDIR holds a "
+        "finished result (T_lidar_camera): it goes, with the report and exports made from it",
     )
     return p
 
@@ -82,7 +85,9 @@ def run(args: argparse.Namespace) -> int:
 
     calibrator = stage_calibrator(args, ("initial_guess", "seed"))
     manual = getattr(args, "manual", None)
-    calibrator.run(manual=manual, only="initial-guess", accept_failed_guess=args.force)
+    calibrator.run(
+        manual=manual, only="initial-guess", accept_failed_guess=args.force, overwrite=args.force
+    )
     guess, corr = calibrator.guess, calibrator._guess_corr
     if manual is not None:
         print(f"{len(corr)} manual correspondences from {manual}")

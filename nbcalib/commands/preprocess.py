@@ -4,7 +4,12 @@ from __future__ import annotations
 
 import argparse
 
-from nbcalib.commands._args import add_input_arguments, input_spec, split_workdir
+from nbcalib.commands._args import (
+    add_force_argument,
+    add_input_arguments,
+    input_spec,
+    split_workdir,
+)
 from nbcalib.errors import InputError
 
 DESCRIPTION = """\
@@ -53,6 +58,7 @@ def add_parser(subparsers, formatter_class) -> argparse.ArgumentParser:
     )
     add_input_arguments(p)
     add_options(p.add_argument_group("preprocessing"), PREPROCESS)
+    add_force_argument(p)
     return p
 
 
@@ -69,7 +75,7 @@ def run(args) -> int:
             "--frames DIR)"
         )
     calibrator = Calibrator(build_config(args), workdir=workdir)
-    calibrator.run(spec, only="preprocess")
+    calibrator.run(spec, only="preprocess", overwrite=args.force)
     total = sum(len(p) for p in calibrator.pairs)
     print(
         f"wrote {workdir}: {len(calibrator.pairs)} pair(s), {total} points, "

@@ -17,6 +17,7 @@ from nbcalib.commands._args import (
     INIT_UNCERTAINTY_HELP,
     add_input_arguments,
     add_verbosity_arguments,
+    check_model_dir,
     input_spec,
     parse_pose,
     parse_start,
@@ -209,6 +210,8 @@ def run(args: argparse.Namespace) -> int:
     no_matching = bool(options.get("no_matching"))
     if no_matching and init is None and manual is None:
         raise InputError("--no-matching needs --init POSE or --manual FILE")
+    if "model_dir" in vars(args) or "model_dir" in file_other:
+        check_model_dir(options.get("model_dir"))
     force = bool(options.get("force"))
     calibrator = Calibrator(config, workdir=work, model_dir=options.get("model_dir"))
     calibrator.run_options = {k: options.get(k) for k in REMEMBERED}

@@ -41,11 +41,26 @@ JIT_PARALLEL_OPTIONS = {**JIT_OPTIONS, "parallel": True}
 JIT_INLINE_OPTIONS = {**JIT_OPTIONS, "inline": "always"}
 
 
+def _njit(options: dict, f):
+    """``numba.njit(**options)(f)``, without the on-disk cache where none can be written.
+
+    numba refuses ``cache=True`` ("cannot cache function") when neither the package's folder nor
+    the user's cache folder is writable: a read-only install run by a user without a home. The
+    kernels then compile in every process instead of failing to import.
+    """
+    try:
+        return numba.njit(**options)(f)
+    except RuntimeError as exc:
+        if not options.get("cache") or "cannot cache" not in str(exc):
+            raise
+        return numba.njit(**{**options, "cache": False})(f)
+
+
 def jit(func=None, *, fastmath=False):
     """Compile ``func`` as a serial nopython kernel with the project's options."""
 
     def wrap(f):
-        return numba.njit(**JIT_OPTIONS, fastmath=set(fastmath) if fastmath else False)(f)
+        return _njit({**JIT_OPTIONS, "fastmath": set(fastmath) if fastmath else False}, f)
 
     return wrap if func is None else wrap(func)
 
@@ -54,7 +69,7 @@ def jit_inline(func=None, *, fastmath=False):
     """Compile ``func`` as a small helper that numba inlines into every kernel calling it."""
 
     def wrap(f):
-        return numba.njit(**JIT_INLINE_OPTIONS, fastmath=set(fastmath) if fastmath else False)(f)
+        return _njit({**JIT_INLINE_OPTIONS, "fastmath": set(fastmath) if fastmath else False}, f)
 
     return wrap if func is None else wrap(func)
 
@@ -89,6 +104,6 @@ def jit_parallel(func=None, *, fastmath=False):
 
     def wrap(f):
         options = dict(JIT_PARALLEL_OPTIONS, fastmath=set(fastmath) if fastmath else False)
-        return numba.njit(**options)(_renamed(f, "_parallel"))
+        return _njit(options, _renamed(f, "_parallel"))
 
     return wrap if func is None else wrap(func)

@@ -44,11 +44,17 @@ def choose_mode(pair: PairInput, config: PreprocessConfig) -> str:
     return "dynamic" if _azimuth_coverage_deg(pair.scans[0].points) > 180 else "static"
 
 
+#: Images smaller than this on a side are refused (a learned matcher's cells are 8 px, and
+#: fine registration's pyramid and visibility window need room around each point).
+MIN_IMAGE_SIDE = 32
+
+
 def check_pairs(pairs: Sequence[PairInput], camera: CameraModel) -> None:
     """Refuse inputs that cannot make a work directory (message names the pair or file).
 
-    Checks: at least one pair, unique names, one camera for all bags, images of the camera's
-    size, scans that hold points and intensities.
+    Checks: at least one pair, unique names, one camera for all bags, images of at least
+    :data:`MIN_IMAGE_SIDE` pixels a side and of the camera's size, scans that hold points and
+    intensities.
     """
     if not pairs:
         raise InputError("nothing to preprocess: no bag and no point cloud given")
@@ -63,6 +69,12 @@ def check_pairs(pairs: Sequence[PairInput], camera: CameraModel) -> None:
                 "(mixed sensors across bags?)"
             )
         h, w = pair.image.shape[:2]
+        if min(w, h) < MIN_IMAGE_SIDE:
+            raise InputError(
+                f"the image is {w} x {h} pixels: too small to calibrate with (keypoints and the "
+                f"NID's neighbourhoods need at least {MIN_IMAGE_SIDE} x {MIN_IMAGE_SIDE})",
+                path=pair.image_source,
+            )
         if (w, h) != (camera.width, camera.height):
             raise InputError(
                 f"the image is {w} x {h} but the camera is {camera.width} x {camera.height}",
