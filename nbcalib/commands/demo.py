@@ -145,18 +145,22 @@ def demo_inputs(data: Path, pairs: int):
 
 def run(args: argparse.Namespace) -> int:
     """Synthesise, calibrate, print the errors; returns 0 (the errors are printed, not judged)."""
+    from nbcalib import warmup
     from nbcalib.commands import evaluate, synth
     from nbcalib.config import CalibrationConfig, set_values
     from nbcalib.errors import InputError
     from nbcalib.io.calib_json import read_ground_truth
     from nbcalib.matching.match import available_matchers, resolve_matcher
     from nbcalib.pipeline import Calibrator
+    from nbcalib.workdir import check_writable
 
     start = time.perf_counter()
     cpu_start = time.process_time()
     root = Path(args.workdir)
     if root.exists() and not root.is_dir():
         raise InputError("exists and is not a folder: give a folder for the demo", root)
+    check_writable(root)
+    warmup.start()  # a first run: the later stages' kernels compile beside synth and matching
     data, work = root / "synth", root / "work"
     model_dir = getattr(args, "model_dir", None)
     matcher = resolve_matcher(args.matcher, model_dir)

@@ -304,8 +304,9 @@ def _inlier_counts(camera, R, translations, uv, points, threshold) -> np.ndarray
     ts = np.asarray(translations, dtype=np.float64).reshape(-1, 3)
     q = points @ R.T
     proj, valid = camera.project((q[None, :, :] + ts[:, None, :]).reshape(-1, 3))
-    error = np.linalg.norm(proj - np.tile(uv, (len(ts), 1)), axis=1)
-    return np.count_nonzero((valid & (error < threshold)).reshape(len(ts), -1), axis=1)
+    diff = proj.reshape(len(ts), -1, 2) - uv[None, :, :]
+    error2 = np.einsum("hmi,hmi->hm", diff, diff)
+    return np.count_nonzero(valid.reshape(len(ts), -1) & (error2 < threshold * threshold), axis=1)
 
 
 def _translations_of_pairs(R, bearings, points) -> np.ndarray:

@@ -1,0 +1,24 @@
+"""The first-run warm-up: a tiny job through the stages, started only on a cold cache."""
+
+from __future__ import annotations
+
+from nbcalib import warmup
+
+
+def test_no_process_when_the_cache_is_warm_or_switched_off(monkeypatch):
+    started = []
+    monkeypatch.setattr(warmup.subprocess, "Popen", lambda *a, **k: started.append(a))
+    monkeypatch.setattr(warmup, "cache_is_warm", lambda: True)
+    assert warmup.start() is None
+    monkeypatch.setattr(warmup, "cache_is_warm", lambda: False)
+    monkeypatch.setenv("NBCALIB_NO_WARMUP", "1")
+    assert warmup.start() is None
+    assert not started
+    monkeypatch.delenv("NBCALIB_NO_WARMUP")
+    warmup.start()
+    assert started and started[0][0][1:] == ["-m", "nbcalib.warmup"]
+
+
+def test_the_tiny_job_runs_through_every_stage_and_leaves_the_cache_warm():
+    warmup.tiny_job()  # raises if any stage fails on it
+    assert warmup.cache_is_warm()
