@@ -450,3 +450,119 @@ def test_lidar_edges_of_a_sparse_image_are_its_edges_not_its_points():
     cols = np.argwhere(filled)[:, 1][edges]
     assert 0 < len(edges) < 0.25 * filled.sum()
     assert np.all(np.abs(cols - w // 2) <= 8)
+
+
+# ------------------------------------------------------------------------------ figures
+
+
+def test_rasterised_points_colour_their_pixels_and_leave_the_rest():
+    from nbcalib.report.figures import rasterise_points
+
+    image = np.full((10, 12, 3), 50, dtype=np.uint8)
+    uv = np.array([[2.0, 3.0], [7.4, 6.6], [11.2, 9.3], [-3.0, 4.0], [np.nan, 1.0]])
+    colours = np.array([[255, 0, 0], [0, 255, 0], [0, 0, 255], [9, 9, 9], [9, 9, 9]], np.uint8)
+    out = rasterise_points(image, uv, colours)
+    assert out is not image and np.all(image == 50)  # drawn into a copy
+    expected = image.copy()
+    expected[3, 2] = (255, 0, 0)
+    expected[7, 7] = (0, 255, 0)  # the pixel the point falls in: row 7 (6.6), column 7 (7.4)
+    expected[9, 11] = (0, 0, 255)  # outside and NaN points are left out
+    np.testing.assert_array_equal(out, expected)
+    # 2 x 2 dots: the block whose centre is nearest to the point
+    out = rasterise_points(image, uv[1:2], colours[1], size=2)
+    assert {tuple(p) for p in np.argwhere(out[..., 1] == 255)} == {(6, 7), (6, 8), (7, 7), (7, 8)}
+    assert np.all(out[out[..., 1] != 255] == 50)
+    # 3 x 3 dots centred on the point, cut at the border
+    out = rasterise_points(image, np.array([[0.0, 5.0]]), colours[0], size=3)
+    assert {tuple(p) for p in np.argwhere(out[..., 0] == 255)} == {
+        (r, c) for r in (4, 5, 6) for c in (0, 1)
+    }
+
+
+def test_rasterised_nearer_points_cover_farther_ones():
+    from nbcalib.report.figures import rasterise_points
+
+    image = np.zeros((6, 6, 3), dtype=np.uint8)
+    uv = np.array([[2.0, 2.0], [2.2, 1.9], [3.0, 2.0]])
+    colours = np.array([[200, 0, 0], [0, 200, 0], [0, 0, 200]], np.uint8)
+    # the near point (green) wins the pixel it shares with the red one, whichever comes first;
+    # the far blue point keeps its own pixel
+    for order in ([0, 1, 2], [2, 1, 0]):
+        out = rasterise_points(image, uv[order], colours[order], np.array([5.0, 2.0, 9.0])[order])
+        assert tuple(out[2, 2]) == (0, 200, 0)
+        assert tuple(out[2, 3]) == (0, 0, 200)
+    out = rasterise_points(image, uv, colours, np.array([5.0, 2.0, 9.0]), size=3)
+    # the near green dot covers rows and columns 1-3, over the red one and part of the blue
+    assert np.all(out[1:4, 1:4] == (0, 200, 0))
+    assert np.all(out[1:4, 4] == (0, 0, 200))  # the rest of the blue dot
+    assert not np.any(out[..., 0])  # nothing left of the red dot
+
+
+def _png_pixels(data: bytes) -> np.ndarray:
+    from io import BytesIO
+
+    from PIL import Image
+
+    return np.asarray(Image.open(BytesIO(data)).convert("RGB"))
+
+
+def test_overlay_panels_show_the_points_in_their_colours_on_the_image():
+    pytest.importorskip("matplotlib")
+    import matplotlib as mpl
+
+    from nbcalib.report import figures as fg
+
+    cam = example_camera("plumb_bob", 200, 150)
+    image = np.full((150, 200), 128, dtype=np.uint8)  # blank grey
+    uv = np.array([[30.0, 40.0], [100.0, 75.0], [170.0, 120.0], [60.0, 130.0]])
+    ranges = np.array([2.0, 3.0, 5.0, 4.0])
+    intensities = np.array([0.1, 0.9, 0.5, 0.3])
+    bearings = cam.unproject(uv)
+    points = bearings / np.linalg.norm(bearings, axis=1, keepdims=True) * ranges[:, None]
+    png = fg.overlays(cam, image, points, intensities, [("result", np.eye(4), np.arange(4))])
+    pixels = _png_pixels(png)
+    scale = fg.OVERLAY_PANEL_WIDTH / cam.width
+    panel_h = round(fg.OVERLAY_PANEL_WIDTH * cam.height / cam.width)
+    centres = np.floor((uv + 0.5) * scale).astype(int)  # the dots' centre pixels (column, row)
+    column_w = fg.OVERLAY_PANEL_WIDTH + sum(fg._COLORBAR_PX) + fg._MARGIN_PX
+    top = fg._MARGIN_PX + fg._TITLE_PX
+    for col, (cmap, norm, values) in enumerate(
+        [
+            ("turbo", mpl.colors.Normalize(0.0, np.percentile(ranges, 98)), ranges),
+            ("viridis", mpl.colors.Normalize(0.0, 1.0), intensities),
+        ]
+    ):
+        left = fg._MARGIN_PX + col * column_w
+        panel = pixels[top : top + panel_h, left : left + fg.OVERLAY_PANEL_WIDTH]
+        expected = mpl.colormaps[cmap](norm(values), bytes=True)[:, :3]
+        near = np.zeros(panel.shape[:2], dtype=bool)
+        for (c, r), colour in zip(centres, expected):
+            np.testing.assert_array_equal(
+                panel[r - 1 : r + 2, c - 1 : c + 2], np.broadcast_to(colour, (3, 3, 3))
+            )
+            near[r - 2 : r + 3, c - 2 : c + 3] = True
+        assert np.all(panel[~near] == 128)  # everywhere else: the image
+
+
+def test_edge_overlay_draws_the_edge_points_in_orange():
+    pytest.importorskip("matplotlib")
+    from nbcalib.report import figures as fg
+
+    cam = example_camera("plumb_bob", 200, 150)
+    image = np.full((150, 200), 128, dtype=np.uint8)  # no edges: a black background
+    uv = np.array([[30.0, 40.0], [100.0, 75.0], [170.0, 120.0]])
+    bearings = cam.unproject(uv)
+    points = 3.0 * bearings / np.linalg.norm(bearings, axis=1, keepdims=True)
+    poses = [("initial guess", np.eye(4), np.arange(3)), ("result", np.eye(4), np.arange(2))]
+    pixels = _png_pixels(fg.edge_overlay(cam, image, points, np.array([0, 1, 2]), poses))
+    scale = fg.EDGE_PANEL_WIDTH / cam.width
+    panel_h = round(fg.EDGE_PANEL_WIDTH * cam.height / cam.width)
+    centres = np.floor((uv + 0.5) * scale).astype(int)
+    top = fg._MARGIN_PX + fg._TITLE_PX
+    for k, n_drawn in enumerate((3, 2)):
+        left = fg._MARGIN_PX + k * (fg.EDGE_PANEL_WIDTH + fg._MARGIN_PX)
+        panel = pixels[top : top + panel_h, left : left + fg.EDGE_PANEL_WIDTH]
+        orange = np.all(panel == (255, 127, 14), axis=2)
+        for i, (c, r) in enumerate(centres):
+            assert orange[r, c] == (i < n_drawn)
+        assert np.all(panel[~orange] == 0)
