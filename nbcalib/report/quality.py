@@ -587,11 +587,11 @@ def interval_quantiles(
     rotation_bound : float
         Quantile of ``|omega|`` (radians).
     """
-    from scipy.stats import norm
+    from statistics import NormalDist  # scipy.stats costs ~1 s to import
 
     cov = 0.5 * (covariance + covariance.T)
     sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    z = float(norm.ppf(0.5 + confidence / 2.0))
+    z = NormalDist().inv_cdf(0.5 + confidence / 2.0)
     rng = np.random.default_rng(_QUANTILE_SEED)
     w, V = np.linalg.eigh(cov)
     samples = (rng.standard_normal((_QUANTILE_SAMPLES, 6)) * np.sqrt(np.clip(w, 0, None))) @ V.T
@@ -657,7 +657,7 @@ def _move_reasons(q: Quality) -> list[str]:
 
 def _reasons(q: Quality, n_negative: int, pair_mahalanobis: list[float]) -> list[str]:
     """One line per reason to distrust the result (empty: ok)."""
-    from scipy.stats import chi2
+    from scipy.special import chdtri  # chi2.ppf(q, k) = chdtri(k, 1 - q), without scipy.stats
 
     c = q.config
     reasons = []
@@ -714,7 +714,7 @@ def _reasons(q: Quality, n_negative: int, pair_mahalanobis: list[float]) -> list
             )
     reasons += _move_reasons(q)
     if pair_mahalanobis:
-        limit = float(chi2.ppf(c.pair_disagreement_quantile, 6))
+        limit = float(chdtri(6, 1.0 - c.pair_disagreement_quantile))
         bad = [name for name, d2 in zip(q.names, pair_mahalanobis) if d2 > limit]
         if bad:
             reasons.append(f"pairs disagree: the optimum of {', '.join(bad)} lies elsewhere")
