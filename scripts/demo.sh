@@ -8,5 +8,4 @@ cd "$(dirname "${BASH_SOURCE[0]}")/.."
 source scripts/env.sh
 nbcalib_env all
 nbcalib_clear_stale_numba_cache
-nbcalib selfcheck
 nbcalib demo "${1:-nbcalib_demo}"

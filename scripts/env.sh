@@ -15,7 +15,10 @@ nbcalib_env() {
     source .venv/bin/activate
   fi
   echo "[nbcalib] installing nbcalib[$extras] into $(python -c 'import sys; print(sys.prefix)')"
-  python -m pip install -qq --upgrade pip
+  # editable installs from pyproject.toml need pip >= 21.3; a newer pip is not fetched otherwise
+  if ! python -c 'import sys, pip; sys.exit(int(pip.__version__.split(".")[0]) < 22)' 2>/dev/null; then
+    python -m pip install -qq --upgrade pip
+  fi
   python -m pip install -qq -e ".[$extras]"
 }
 

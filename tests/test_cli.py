@@ -100,3 +100,49 @@ def test_no_retries_switches_the_matching_retries_off():
     assert default.matching.retry_pixels_per_degree == (10.0, 15.0)
     off = build_config(parser.parse_args(["--no-retries"]))
     assert off.matching.retry_pixels_per_degree == ()
+
+
+@pytest.mark.parametrize(
+    "argv, dest, value",
+    [
+        (["calibrate", "w", "--init", "-0.1,0.2,0.3,0,0,0,1"], "init", "-0.1,0.2,0.3,0,0,0,1"),
+        (["run", "w", "--prior", "-0.5,0.5,-0.5,0.5,0,0,1"], "prior", "-0.5,0.5,-0.5,0.5,0,0,1"),
+        (
+            ["preprocess", "a.npy", "b.png", "w", "--distortion", "-0.12,0.16,0,0,0"],
+            "distortion",
+            "-0.12,0.16,0,0,0",
+        ),
+        (
+            ["preprocess", "a.npy", "b.png", "w", "--intrinsics", "-1e3,1e3,320,240"],
+            "intrinsics",
+            "-1e3,1e3,320,240",
+        ),
+        (["run", "w", "--image-times", "-.5,1.5"], "image_times", "-.5,1.5"),
+        (
+            ["synth", "o", "--T-lidar-camera", "-0.1,0,0,0,0,0,1"],
+            "T_lidar_camera",
+            "-0.1,0,0,0,0,0,1",
+        ),
+    ],
+)
+def test_list_values_may_start_with_a_minus_in_the_space_separated_form(argv, dest, value):
+    from nbcalib.cli import _parse, join_negative_values
+
+    args = _parse(build_parser(), join_negative_values(argv))
+    assert getattr(args, dest) == value
+
+
+def test_positional_arguments_may_follow_options():
+    from nbcalib.cli import _parse
+
+    args = _parse(build_parser(), ["preprocess", "a.pcd", "--image", "b.png", "work"])
+    assert args.inputs == ["a.pcd", "work"] and args.image == "b.png"
+
+
+@pytest.mark.parametrize("name", COMMANDS)
+def test_help_shows_no_empty_or_switch_defaults(name, capsys):
+    with pytest.raises(SystemExit):
+        main([name, "--help"])
+    out = capsys.readouterr().out
+    for empty in ("(default: None)", "(default: True)", "(default: False)", "(default: [])"):
+        assert empty not in out
