@@ -131,7 +131,8 @@ class Progress:
         if self.mode == "bar" and now - self._shown_at >= BAR_REFRESH:
             self._draw(now)
         elif self.mode == "lines" and now - self._shown_at >= self.interval:
-            self._line(now)
+            if not (self.total and self.done >= self.total):  # the last step: close() says it
+                self._line(now)
 
     def close(self, failed: bool = False) -> None:
         """The last line (a bar's final state and a line break); nothing more after it.
