@@ -183,7 +183,10 @@ def test_image_size_must_match_camera(plain_files, tmp_path, capsys):
 
 def test_empty_and_nan_clouds(tmp_path, capsys, plain_files):
     _, image = plain_files
-    for name, values in (("empty.pcd", np.zeros((0, 4))), ("nan.pcd", np.full((10, 4), np.nan))):
+    for name, values, message in (
+        ("empty.pcd", np.zeros((0, 4)), "holds no points"),
+        ("nan.pcd", np.full((10, 4), np.nan), "none of its 10 points has a finite x, y and z"),
+    ):
         path = tmp_path / name
         write_pcd(
             path,
@@ -192,7 +195,7 @@ def test_empty_and_nan_clouds(tmp_path, capsys, plain_files):
         )
         assert main(["preprocess", str(path), str(image), str(tmp_path / "w"), *CAMERA]) == 2
         err = capsys.readouterr().err
-        assert err == "nbcalib preprocess: error: scan 0 of pair '000000' holds no finite point\n"
+        assert err == f"nbcalib preprocess: error: {path}: {message}\n"
         assert not (tmp_path / "w" / "calib.json").exists()
 
 

@@ -47,7 +47,7 @@ from nbcalib.io.bag_messages import (
     raw_header_stamp_ns,
     typestore,
 )
-from nbcalib.io.pointcloud import PointCloud, pointcloud_from_fields
+from nbcalib.io.pointcloud import PointCloud, pointcloud_from_fields, warn_dropped_points
 
 if TYPE_CHECKING:
     from nbcalib.camera import CameraModel
@@ -80,23 +80,21 @@ class Bag:
 
         self.path = Path(path)
         bag_path = _resolve_bag_path(self.path)
+        self._reader = None
         try:
             self._reader = AnyReader([bag_path], default_typestore=typestore(ros1=False))
             self._reader.open()
+            self._add_missing_types()
+            topics = sorted(self._reader.topics.items())  # damaged metadata: names not strings
+            self.topics = {name: info.msgtype or "(mixed types)" for name, info in topics}
+            self.message_counts = {name: int(info.msgcount) for name, info in topics}
         except FileNotFoundError as exc:
             raise InputError(f"cannot open as a ROS bag: {exc}", path=self.path) from None
         except Exception as exc:  # rosbags, sqlite3, yaml and mcap errors alike
+            self.close()
             raise InputError(
                 f"cannot open as a ROS bag ({type(exc).__name__}: {exc})", path=self.path
             ) from None
-        self._add_missing_types()
-        self.topics = {
-            name: info.msgtype or "(mixed types)"
-            for name, info in sorted(self._reader.topics.items())
-        }
-        self.message_counts = {
-            name: int(info.msgcount) for name, info in sorted(self._reader.topics.items())
-        }
 
     def _add_missing_types(self) -> None:
         """Register known types (Livox, ROS 2 Humble) that the bag did not define."""
@@ -170,7 +168,23 @@ class Bag:
         connections = [c for c in self._reader.connections if c.topic == topic]
         if not connections:
             raise InputError(f"no topic '{topic}' in the bag", path=self.path)
-        for connection, log_time, raw in self._reader.messages(connections=connections):
+        messages = self._reader.messages(connections=connections)
+        while True:
+            try:
+                connection, log_time, raw = next(messages)
+            except StopIteration:
+                return
+            except Exception as exc:  # rosbags, sqlite3 and mcap errors alike: a damaged bag
+                raise InputError(
+                    f"cannot read the messages on {topic} ({type(exc).__name__}: {exc})",
+                    path=self.path,
+                ) from None
+            if connection.topic != topic:  # two connections of one id: a damaged bag index
+                raise InputError(
+                    f"cannot read the messages on {topic}: a message of {connection.topic} among "
+                    "them (damaged bag index)",
+                    path=self.path,
+                )
             yield int(log_time), connection.msgtype, raw
 
     def messages(self, topic: str) -> Iterator[tuple[int, object]]:
@@ -191,8 +205,9 @@ class Bag:
         stamps = []
         for log_time, msgtype, raw in self.raw_messages(topic):
             stamp = raw_header_stamp_ns(bytes(raw[:12]), cdr=self._reader.is2)
-            if stamp is None:  # an exotic encoding: the slow, sure way
-                stamp = header_stamp_ns(self._deserialize(raw, msgtype, topic).header)
+            if stamp is None:  # an exotic encoding or a short message: the slow, sure way
+                header = getattr(self._deserialize(raw, msgtype, topic), "header", None)
+                stamp = header_stamp_ns(header) if header is not None else 0
             stamps.append(stamp or log_time)
         return stamps
 
@@ -234,25 +249,31 @@ class Bag:
             Header stamp, nanoseconds.
         cloud : PointCloud
             Points in the LiDAR frame (metres), intensity as stored, times in seconds relative
-            to the scan.
+            to the scan. Points with a non-finite x, y or z are dropped; how many is logged as
+            one warning when the iteration ends.
         """
         from nbcalib.io.pointcloud2 import pointcloud2_to_fields
 
         topic = self.select_topic("point cloud", topic)
         source = f"{self.path} {topic}"
-        for log_time, msgtype, raw in self._chosen_messages(topic, only):
-            if msgtype in LIVOX_CUSTOM:
-                stamp, fields = self._livox_fields(raw, msgtype, topic)
-                times = "offset_time" if time_field == "auto" else time_field
-            else:
-                msg = self._deserialize(raw, msgtype, topic)
-                stamp = header_stamp_ns(msg.header)
-                fields = pointcloud2_to_fields(msg, source=source)
-                times = time_field
-            cloud = pointcloud_from_fields(
-                fields, intensity_channel=intensity_channel, time_field=times, source=source
-            )
-            yield (stamp or log_time), cloud
+        total = kept = 0  # points read and kept (finite), for one warning at the end
+        try:
+            for log_time, msgtype, raw in self._chosen_messages(topic, only):
+                if msgtype in LIVOX_CUSTOM:
+                    stamp, fields = self._livox_fields(raw, msgtype, topic)
+                    times = "offset_time" if time_field == "auto" else time_field
+                else:
+                    msg = self._deserialize(raw, msgtype, topic)
+                    stamp = header_stamp_ns(msg.header)
+                    fields = pointcloud2_to_fields(msg, source=source)
+                    times = time_field
+                cloud = pointcloud_from_fields(
+                    fields, intensity_channel=intensity_channel, time_field=times, source=source
+                )
+                total, kept = total + len(fields["x"]), kept + len(cloud)
+                yield (stamp or log_time), cloud
+        finally:
+            warn_dropped_points(source, total - kept, total)
 
     def _chosen_messages(self, topic: str, only):
         """``raw_messages(topic)``, only those numbered in ``only`` (0-based) when given."""
@@ -334,8 +355,17 @@ class Bag:
             for tf in msg.transforms:
                 q, t = tf.transform.rotation, tf.transform.translation
                 T = np.eye(4)
-                T[:3, :3] = quat_xyzw_to_matrix([q.x, q.y, q.z, q.w])
                 T[:3, 3] = [t.x, t.y, t.z]
+                try:
+                    if not np.isfinite(T).all():
+                        raise ValueError("its translation is not finite")
+                    T[:3, :3] = quat_xyzw_to_matrix([q.x, q.y, q.z, q.w])
+                except ValueError as exc:  # a zero or non-finite quaternion
+                    raise InputError(
+                        f"bad transform {tf.header.frame_id} -> {tf.child_frame_id} on {topic}: "
+                        f"{exc}",
+                        path=self.path,
+                    ) from None
                 transforms.append((tf.header.frame_id, tf.child_frame_id, T))
         return transforms
 

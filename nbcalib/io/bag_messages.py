@@ -278,7 +278,7 @@ def decode_image(msg, *, grey: bool = True, source=None) -> np.ndarray:
     Raises
     ------
     InputError
-        Unknown encoding or data shorter than ``height x step``.
+        Unknown encoding, data shorter than ``height x step``, or a YUV 4:2:2 image of odd width.
     """
     encoding = str(msg.encoding).lower()
     if encoding not in _IMAGE_LAYOUTS:
@@ -299,6 +299,8 @@ def decode_image(msg, *, grey: bool = True, source=None) -> np.ndarray:
             f"pixels with step {msg.step}",
             path=source,
         )
+    if order in ("UYVY", "YUY2") and width % 2:
+        raise InputError(f"{encoding} image has an odd width {width}", path=source)
     rows = np.lib.stride_tricks.as_strided(
         data, shape=(height, row_bytes), strides=(step, 1), writeable=False
     )
@@ -324,7 +326,10 @@ def decode_compressed_image(msg, *, grey: bool = True, source=None) -> np.ndarra
     from nbcalib.io.image import _from_bgr
 
     data = np.ascontiguousarray(buffer_array(msg.data), dtype=np.uint8)
-    image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+    try:
+        image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+    except cv2.error:  # a corrupt header OpenCV refuses (sizes beyond its limits)
+        image = None
     if image is None:
         raise InputError(f"cannot decode compressed image (format '{msg.format}')", path=source)
     if image.dtype not in (np.uint8, np.uint16):

@@ -466,7 +466,10 @@ def read_image_size(path: str | os.PathLike) -> tuple[int, int]:
         return int.from_bytes(head[16:20], "big"), int.from_bytes(head[20:24], "big")
     import cv2
 
-    image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    try:
+        image = cv2.imread(str(path), cv2.IMREAD_UNCHANGED)
+    except cv2.error:  # a corrupt header OpenCV refuses (sizes beyond its limits)
+        image = None
     if image is None:
         raise InputError("not an image OpenCV can read", path)
     return int(image.shape[1]), int(image.shape[0])
@@ -483,6 +486,7 @@ def T_camera_lidar_from_values(
     """
     _check_pose(values, what, path)
     xyz_quat = np.array(values, dtype=np.float64)
+    xyz_quat[3:] /= np.max(np.abs(xyz_quat[3:]))  # first: the norm of huge values overflows
     xyz_quat[3:] /= np.linalg.norm(xyz_quat[3:])
     return invert_T(pose_from_xyz_quat(xyz_quat))
 
@@ -623,7 +627,11 @@ def _is_int(value) -> bool:
 def _check_numbers(values, what: str, path) -> None:
     if not isinstance(values, list) or not all(_is_number(v) for v in values):
         raise InputError(f"{what} must be a list of numbers, got {json.dumps(values)}", path)
-    if not all(math.isfinite(v) for v in values):
+    try:
+        finite = all(math.isfinite(v) for v in values)
+    except OverflowError:  # an integer beyond the range of floats
+        raise InputError(f"{what} holds a number too large for a float", path) from None
+    if not finite:
         raise InputError(f"{what} holds a non-finite number", path)
 
 

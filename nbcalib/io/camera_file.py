@@ -173,18 +173,17 @@ def _read_opencv_storage(path: Path) -> dict:
     try:
         root = storage.root()
         return {key: _node_value(root.getNode(key)) for key in root.keys()}
-    except (cv2.error, SystemError) as exc:
+    except (cv2.error, SystemError, UnicodeDecodeError) as exc:  # names and strings not UTF-8
         raise InputError(f"cannot read OpenCV FileStorage: {exc}", path) from None
     finally:
         storage.release()
 
 
 def _node_value(node) -> Any:
+    # an !!opencv-matrix stays a map {rows, cols, dt, data} (_numbers takes its data): OpenCV's
+    # node.mat() corrupts memory on a damaged one (cols: -3), crashing the process
     if node.isMap():
-        keys = node.keys()
-        if "dt" in keys and "data" in keys:  # an !!opencv-matrix
-            return node.mat()
-        return {key: _node_value(node.getNode(key)) for key in keys}
+        return {key: _node_value(node.getNode(key)) for key in node.keys()}
     if node.isSeq():
         return [_node_value(node.at(i)) for i in range(node.size())]
     if node.isInt():
@@ -277,6 +276,8 @@ def _numbers(value, what: str, path: Path, count: int | None = None) -> list[flo
         array = np.asarray(value, dtype=np.float64).ravel()
     except (TypeError, ValueError):
         raise InputError(f"{what} must be a list of numbers, got {_short(value)}", path) from None
+    except OverflowError:  # an integer beyond the range of floats
+        raise InputError(f"{what} holds a number too large for a float", path) from None
     if not np.all(np.isfinite(array)):
         raise InputError(f"{what} holds a non-finite number", path)
     if count is not None and array.size != count:

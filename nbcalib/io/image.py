@@ -50,7 +50,10 @@ def read_image(path, *, grey: bool = True) -> np.ndarray:
         raise InputError("is a directory, expected an image file", path=path) from None
     if data.size == 0:
         raise InputError("empty file", path=path)
-    image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+    try:
+        image = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+    except cv2.error:  # a corrupt header OpenCV refuses (sizes beyond its limits)
+        image = None
     if image is None:
         raise InputError("cannot decode as an image (corrupt or unknown format)", path=path)
     if image.dtype not in (np.uint8, np.uint16):

@@ -45,6 +45,7 @@ _PCD_TYPES = {
 }
 _PCD_ENCODINGS = ("ascii", "binary", "binary_compressed")
 _PCD_MAX_HEADER = 1 << 16  # bytes searched for the DATA line
+_LZF_MAX_EXPANSION = 88  # LZF's longest back reference: 264 bytes in 3
 
 
 @dataclass
@@ -110,18 +111,26 @@ def _parse_pcd_header(data: bytes, path: Path) -> _PcdHeader:
     for name, typ, size, count in zip(names, types, sizes, counts):
         if (typ, size) not in _PCD_TYPES:
             raise InputError(f"field '{name}' has unsupported TYPE {typ} SIZE {size}", path=path)
-        if count < 1:
+        if not 1 <= count <= len(data):  # more values than the file has bytes: corrupt
             raise InputError(f"field '{name}' has COUNT {count}", path=path)
         dtypes.append(np.dtype(_PCD_TYPES[(typ, size)]).newbyteorder("<"))
 
-    width = ints("WIDTH", [-1])[0]
-    height = ints("HEIGHT", [1])[0]
-    points = ints("POINTS", [-1])[0]
-    if width < 0 and points < 0:
+    def point_count(key: str) -> int | None:
+        """The one number >= 0 of a WIDTH, HEIGHT or POINTS line; None without the line."""
+        if key not in values:
+            return None
+        numbers = ints(key)
+        if len(numbers) != 1 or numbers[0] < 0:
+            raise InputError(f"bad {key} line: {' '.join(values[key])!r}", path=path)
+        return numbers[0]
+
+    width, height, points = (point_count(k) for k in ("WIDTH", "HEIGHT", "POINTS"))
+    height = 1 if height is None else height
+    if width is None and points is None:
         raise InputError("header has neither WIDTH nor POINTS", path=path)
-    if points < 0:
+    if points is None:
         points = width * height
-    if width < 0:
+    if width is None:
         width, height = points, 1
     if width * height != points:
         raise InputError(
@@ -214,6 +223,11 @@ def _decode_pcd_compressed(
         raise InputError(
             f"binary_compressed data holds {size} bytes uncompressed, expected {expected} "
             f"for {n} points",
+            path=path,
+        )
+    if size > _LZF_MAX_EXPANSION * compressed_size:  # refused before allocating ``size`` bytes
+        raise InputError(
+            f"binary_compressed data of {compressed_size} bytes cannot hold {size} bytes",
             path=path,
         )
     if len(body) - 8 < compressed_size:

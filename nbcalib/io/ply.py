@@ -17,7 +17,7 @@ import numpy as np
 from nbcalib.errors import InputError
 from nbcalib.io._fields import ascii_rows, fill_table, struct_to_fields
 from nbcalib.io._files import read_bytes, write_bytes_atomic
-from nbcalib.io.pointcloud import PointCloud, pointcloud_from_fields
+from nbcalib.io.pointcloud import PointCloud, pointcloud_from_file_fields
 
 _PLY_TYPES = {
     "char": "i1",
@@ -65,6 +65,8 @@ def _parse_ply_header(data: bytes, path: Path) -> tuple[str, list[_PlyElement], 
                 fmt = words[1]
             elif words[0] == "element":
                 elements.append(_PlyElement(words[1], int(words[2])))
+                if elements[-1].count < 0:
+                    raise ValueError("negative count")
             elif words[0] == "property" and words[1] == "list":
                 elements[-1].has_list = True
                 elements[-1].properties.append((words[4], "list"))
@@ -115,17 +117,19 @@ def read_ply_fields(path) -> dict[str, np.ndarray]:
     if element.has_list:
         raise InputError("vertex element with list properties is not supported", path=path)
     names = [name for name, _ in element.properties]
+    if not names:
+        raise InputError("vertex element without properties", path=path)
     if len(set(names)) != len(names):
         raise InputError(f"duplicate vertex properties: {' '.join(names)}", path=path)
     n = element.count
     dtype = np.dtype([(name, byte_order + code) for name, code in element.properties])
-    if binary:
+    if n == 0:
+        array = np.zeros(0, dtype=dtype)
+    elif binary:
         held = max(len(data) - offset, 0) // dtype.itemsize
         if held < n:
             raise InputError(f"expected {n} vertices, file holds {held}", path=path)
         array = np.frombuffer(data, dtype=dtype, count=n, offset=offset)
-    elif n == 0:
-        array = np.zeros(0, dtype=dtype)
     else:
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", UserWarning)
@@ -147,11 +151,11 @@ def read_ply(
 
     Intensity and time fields follow :func:`~nbcalib.io.pointcloud.read_pointcloud`'s rules.
     """
-    return pointcloud_from_fields(
+    return pointcloud_from_file_fields(
         read_ply_fields(path),
+        Path(path),
         intensity_channel=intensity_channel,
         time_field=time_field,
-        source=Path(path),
     )
 
 

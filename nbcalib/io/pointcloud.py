@@ -16,7 +16,9 @@ serve ``sensor_msgs/PointCloud2`` messages (:mod:`nbcalib.io.pointcloud2`) throu
   negative times are shifted so that the minimum is 0; if the first time is still >= 1 s the
   times are absolute and are made relative to the first point; float values above 1e16 are taken
   as nanoseconds (Livox). The result is seconds relative to the scan, float64.
-- **finite points only**: rows whose x, y or z is not finite are dropped from every field.
+- **finite points only**: rows whose x, y or z is not finite are dropped from every field. The
+  readers of files and bags log a warning (logger ``nbcalib``) naming the file and how many
+  points were dropped; a file without a single finite point is an :class:`InputError`.
 
 Writers (:func:`~nbcalib.io.pcd.write_pcd`, :func:`~nbcalib.io.ply.write_ply`,
 :func:`~nbcalib.io.kitti_bin.write_kitti_bin`) write to a temporary file beside the target and
@@ -25,6 +27,7 @@ rename it into place, so a crash never leaves a file that looks complete.
 
 from __future__ import annotations
 
+import logging
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -41,6 +44,8 @@ INTENSITY_PRIORITY = ("reflectivity", "intensity")
 
 #: Per-point time fields in the order ``time_field="auto"`` looks for them (reference rule).
 TIME_FIELDS = ("t", "time", "time_stamp", "timestamp")
+
+log = logging.getLogger("nbcalib")
 
 _FIRST_TIME_ABSOLUTE_S = 1.0  # a first time >= 1 s means absolute times (reference TimeKeeper)
 _NANOSECONDS_ABOVE = 1e16  # float "seconds" above this are nanoseconds (Livox)
@@ -203,6 +208,8 @@ def pointcloud_from_fields(
     for c in "xyz":
         if fields[c].ndim != 1:
             raise InputError(f"field '{c}' has count {fields[c].shape[1:]}, expected 1", source)
+        if fields[c].dtype.kind not in "iuf":
+            raise InputError(f"field '{c}' holds {fields[c].dtype}, not numbers", source)
     xyz = np.stack([fields[c].astype(np.float64, copy=False) for c in "xyz"], axis=1)
     finite = np.isfinite(xyz).all(axis=1)
     if finite.all():
@@ -240,6 +247,44 @@ def pointcloud_from_fields(
     return PointCloud(points=points, intensity=intensity, times=times, fields=kept)
 
 
+def warn_dropped_points(source, dropped: int, total: int) -> None:
+    """Log a warning (logger ``nbcalib``) that points with a non-finite x, y or z were dropped.
+
+    Parameters
+    ----------
+    source : str or os.PathLike
+        The file (or bag and topic) the points came from.
+    dropped, total : int
+        Points dropped, and points read. Nothing is logged when ``dropped`` is 0.
+    """
+    if dropped:
+        log.warning(
+            "%s: dropped %d of %d points with a non-finite x, y or z", source, dropped, total
+        )
+
+
+def pointcloud_from_file_fields(
+    fields: Mapping[str, np.ndarray],
+    path,
+    *,
+    intensity_channel: str | None = "auto",
+    time_field: str | None = "auto",
+) -> PointCloud:
+    """:func:`pointcloud_from_fields` for the fields of one file, its non-finite points reported.
+
+    Dropped points are logged (:func:`warn_dropped_points`); a file of points none of which is
+    finite is an :class:`InputError` naming ``path``. A file of 0 points gives an empty cloud.
+    """
+    cloud = pointcloud_from_fields(
+        fields, intensity_channel=intensity_channel, time_field=time_field, source=path
+    )
+    total = len(fields["x"])
+    if total and not len(cloud):
+        raise InputError(f"none of its {total} points has a finite x, y and z", path=path)
+    warn_dropped_points(path, total - len(cloud), total)
+    return cloud
+
+
 # ----------------------------------------------------------------------------------------------
 # Dispatch
 
@@ -262,12 +307,14 @@ def read_pointcloud(
     -------
     PointCloud
         Points in the sensor frame (metres), intensity as stored, times in seconds relative to
-        the scan (module docstring).
+        the scan (module docstring). Points with a non-finite x, y or z are dropped, with a
+        warning naming the file and how many.
 
     Raises
     ------
     InputError
-        Missing, empty, truncated or corrupt file, or an unknown suffix; the message names the file.
+        Missing, empty, truncated or corrupt file, an unknown suffix, or points none of which is
+        finite; the message names the file.
 
     Notes
     -----
@@ -295,7 +342,6 @@ def read_pointcloud(
             f"{', '.join(POINTCLOUD_SUFFIXES)}",
             path=path,
         )
-    fields = readers[suffix](path)
-    return pointcloud_from_fields(
-        fields, intensity_channel=intensity_channel, time_field=time_field, source=path
+    return pointcloud_from_file_fields(
+        readers[suffix](path), path, intensity_channel=intensity_channel, time_field=time_field
     )

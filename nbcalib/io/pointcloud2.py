@@ -68,8 +68,11 @@ def pointcloud2_dtype(fields, point_step: int, *, is_bigendian: bool = False, so
     Raises
     ------
     InputError
-        An unknown datatype, or a field that does not fit in ``point_step``.
+        An unknown datatype, a field that does not fit in ``point_step``, or a ``point_step``
+        out of range.
     """
+    if not 0 <= point_step < 2**31:  # NumPy's limit for an item size
+        raise InputError(f"PointCloud2 point_step {point_step} is out of range", path=source)
     order = ">" if is_bigendian else "<"
     names, formats, offsets = [], [], []
     for f in fields:
@@ -126,6 +129,8 @@ def pointcloud2_to_fields(msg, *, source=None) -> dict[str, np.ndarray]:
     n = height * width
     if n == 0:
         points = np.zeros(0, dtype=dtype)
+    elif point_step == 0:
+        raise InputError(f"PointCloud2 of {height} x {width} points has point_step 0", path=source)
     else:
         row_bytes = width * point_step
         row_step = max(row_step, row_bytes) if height == 1 else row_step

@@ -42,6 +42,7 @@ __all__ = [
     "classify_inputs",
     "gather_bag",
     "gather_files",
+    "read_scan",
 ]
 
 CLOUD_SUFFIXES = (".pcd", ".ply", ".bin", ".npy", ".npz")
@@ -101,8 +102,8 @@ def classify_inputs(
     for raw in paths:
         p = Path(raw)
         suffix = p.suffix.lower()
-        if p.is_dir() or suffix in BAG_SUFFIXES:
-            bags.append(p)
+        if suffix in BAG_SUFFIXES or (p.is_dir() and suffix not in CLOUD_SUFFIXES + IMAGE_SUFFIXES):
+            bags.append(p)  # a folder named like a cloud or image goes on, to be refused by name
         elif suffix in CLOUD_SUFFIXES:
             clouds.append(p)
         elif suffix in IMAGE_SUFFIXES:
@@ -175,20 +176,45 @@ def gather_files(
 ) -> PairInput:
     """Plain files: point clouds in the given (time) order and one image."""
     from nbcalib.io.image import read_image
-    from nbcalib.io.pointcloud import read_pointcloud
 
     if not cloud_paths:
         raise InputError("no point cloud file given (.pcd, .ply, .bin, .npy, .npz)")
     paths = [Path(p) for p in cloud_paths]
     if config.max_scans is not None:
         paths = paths[: config.max_scans]
-    channel = config.intensity_channel
-    scans = [read_pointcloud(p, intensity_channel=channel) for p in paths]
+    scans = [read_scan(p, config.intensity_channel) for p in paths]
     image_path = Path(image_path)
     if not image_path.is_file():
         raise InputError("image not found", path=image_path)
     image = read_image(image_path, grey=True)
     return PairInput(name, scans, image, str(image_path))
+
+
+def read_scan(path, intensity_channel: str | None = "auto"):
+    """One point cloud file as a scan; a file of no points is refused.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file (:func:`nbcalib.io.pointcloud.read_pointcloud`).
+    intensity_channel : str or None
+        As for :func:`~nbcalib.io.pointcloud.read_pointcloud`.
+
+    Returns
+    -------
+    PointCloud
+
+    Raises
+    ------
+    InputError
+        The file cannot be read, or holds no (finite) point; the message names the file.
+    """
+    from nbcalib.io.pointcloud import read_pointcloud
+
+    cloud = read_pointcloud(path, intensity_channel=intensity_channel)
+    if not len(cloud):
+        raise InputError("holds no points", path=path)
+    return cloud
 
 
 def _numbers(text: str | None, option: str) -> list[float]:
@@ -212,6 +238,14 @@ def _check_all_scans(config: PreprocessConfig, what: str) -> None:
             "--max-scans); scans around an image are for pairs per image (--frames, --images, "
             "or a bag's --every/--pair-count/--image-times)"
         )
+
+
+#: The camera option a camera parameter error is about, by a word of its message.
+_CAMERA_OPTION_WORDS = (
+    ("--distortion", "distortion"),
+    ("--intrinsics", "intrinsics"),
+    ("--camera-model", "model"),
+)
 
 
 @dataclass(frozen=True)
@@ -368,7 +402,14 @@ class InputSpec:
             _check_all_scans(config, "plain files with one image")
             pairs = [gather_files(clouds, images[0], config)]
             data_path = str(Path(clouds[0]).resolve().parent) if clouds else ""
-        camera = self.camera_for(pairs[0].image.shape) or pairs[0].camera
+        try:
+            camera = self.camera_for(pairs[0].image.shape) or pairs[0].camera
+        except InputError as exc:
+            source = pairs[0].image_source
+            if source is None or "images, not" not in str(exc):
+                raise
+            # a camera of another size: the image may be the wrong one, so name it too
+            raise InputError(f"{Path(source).name} does not fit the camera: {exc}") from None
         if camera is None:
             raise InputError(
                 f"{pairs[0].name}: no camera info found; give the camera with --camera FILE or "
@@ -439,4 +480,11 @@ class InputSpec:
             distortion = _numbers(self.distortion, "--distortion")
             return create_camera(model, intrinsics, distortion, width, height)
         except ValueError as exc:
-            raise InputError(str(exc)) from None
+            text = str(exc)
+            if text.startswith("--"):
+                raise InputError(text) from None
+            option = next(
+                (f for f, word in _CAMERA_OPTION_WORDS if word in text),
+                "--camera-model/--intrinsics/--distortion",
+            )
+            raise InputError(f"{option}: {text}") from None

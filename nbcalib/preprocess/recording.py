@@ -281,11 +281,11 @@ def _make_pairs(
 
 def _file_loaders(scan_paths: Sequence[Path], image_paths: Sequence[Path], config):
     from nbcalib.io.image import read_image
-    from nbcalib.io.pointcloud import read_pointcloud
+    from nbcalib.preprocess.inputs import read_scan
 
     def load_scans(indices):
         channel = config.intensity_channel
-        return {k: read_pointcloud(scan_paths[k], intensity_channel=channel) for k in indices}
+        return {k: read_scan(scan_paths[k], intensity_channel=channel) for k in indices}
 
     def load_images(indices):
         out = {}
