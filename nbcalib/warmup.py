@@ -67,7 +67,7 @@ def start() -> subprocess.Popen | None:
 
 
 def _scene(rng: np.random.Generator, camera):
-    """A textured corner (back wall, floor, side wall) seen by ``camera``: image and points.
+    """A textured corner (back wall, floor, side wall) seen by a pinhole ``camera``.
 
     Points are in the camera frame; their intensity is the texture at their position, the
     image the texture at each pixel's first hit.
@@ -83,7 +83,10 @@ def _scene(rng: np.random.Generator, camera):
     ]
     h, w = camera.height, camera.width
     u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
-    rays = camera.unproject(np.column_stack([u.ravel(), v.ravel()]))
+    # a pinhole's rays by its intrinsics: the job compiles the unprojection kernels itself
+    # at once (synth, reading), so the warm-up does not race it for them
+    fx, fy, cx, cy = camera.intrinsics[:4]
+    rays = np.column_stack([(u.ravel() - cx) / fx, (v.ravel() - cy) / fy, np.ones(u.size)])
     depth = np.full(len(rays), np.inf)
     for axis, offset in planes:
         with np.errstate(divide="ignore", invalid="ignore"):
@@ -101,11 +104,18 @@ def _scene(rng: np.random.Generator, camera):
 
 
 def tiny_job() -> None:
-    """Calibrate a small synthetic scene in memory, through the stages a job runs."""
-    from nbcalib.api import calibrate
+    """Calibrate a small synthetic scene in memory, through the stages a job runs.
+
+    In the order a job needs its kernels: preprocessing and rendering, the initial guess's
+    RANSAC, matching's views, then fine registration and the report.
+    """
+    from nbcalib.api import ArrayInputs
     from nbcalib.camera import example_camera
+    from nbcalib.config import CalibrationConfig, set_values
     from nbcalib.initial_guess.estimate import estimate_initial_guess
     from nbcalib.matching.multiview import match_views
+    from nbcalib.pipeline import Calibrator
+    from nbcalib.products import Start
     from nbcalib.transforms import se3_exp
 
     rng = np.random.default_rng(0)
@@ -114,14 +124,14 @@ def tiny_job() -> None:
     # a LiDAR with REP 103 axes (x forward) at the camera
     T_camera_lidar = np.array([[0.0, -1, 0, 0], [0, 0, -1, 0], [1, 0, 0, 0], [0, 0, 0, 1]])
     points = points_camera @ T_camera_lidar[:3, :3]
-    # matching's views, lifting and rotation RANSAC (SIFT: nothing to compile in a model)
-    match_views(camera, image, points, intensities, matcher="sift", views=2)
-    # the initial guess's RANSAC and LM, on exact correspondences
+    inputs = ArrayInputs([points], [intensities], [image], camera)
+    calibrator = Calibrator(set_values(CalibrationConfig(), {"refine.max_outer": 2}))
+    calibrator.run(inputs, until="preprocess")
     uv, valid = camera.project(points_camera[:400])
     estimate_initial_guess(camera, uv[valid], points[:400][valid], seed=0)
-    # preprocessing, rendering, fine registration and the report
-    start = se3_exp(np.array([0.02, -0.01, 0.01, 0.004, -0.003, 0.002])) @ T_camera_lidar
-    calibrate(points, intensities, image, camera, T_init=start, max_outer=2)
+    match_views(camera, image, points, intensities, matcher="sift", views=2)
+    near = se3_exp(np.array([0.02, -0.01, 0.01, 0.004, -0.003, 0.002])) @ T_camera_lidar
+    calibrator.run(inputs, init=Start.from_matrix(near, "warm-up"))
 
 
 if __name__ == "__main__":  # pragma: no cover - run by start() in its own process
