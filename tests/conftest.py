@@ -45,3 +45,21 @@ def hide_learned_models(monkeypatch, empty: Path) -> Path:
 def no_learned_models(tmp_path, monkeypatch):
     """:func:`hide_learned_models` into ``tmp_path / "no-models"``."""
     return hide_learned_models(monkeypatch, tmp_path / "no-models")
+
+
+@pytest.fixture(autouse=True)
+def _restore_nbcalib_logging():
+    """Each test starts with the ``nbcalib`` logger as the last left it was, and ends so.
+
+    ``nbcalib.cli.main`` gives the logger a stderr handler and a level per command line;
+    the handler of one test's ``main`` would otherwise outlive that test's captured stderr.
+    """
+    import logging
+
+    logger = logging.getLogger("nbcalib")
+    handlers, level = list(logger.handlers), logger.level
+    yield
+    for handler in list(logger.handlers):
+        if handler not in handlers:
+            logger.removeHandler(handler)
+    logger.setLevel(level)
