@@ -33,19 +33,33 @@ _MARKER = ("nid", "_joint_hist_smooth_impl")
 
 
 def cache_is_warm() -> bool:
-    """True when the cache beside the kernels holds fine registration's NID kernel."""
-    folder = Path(__file__).parent / "kernels" / "__pycache__"
+    """True when numba's cache holds fine registration's NID kernel.
+
+    The cache is beside the kernels, or under ``NUMBA_CACHE_DIR`` when that is set.
+    """
     module, kernel = _MARKER
-    return any(folder.glob(f"{module}.{kernel}-*.nbi"))
+    pattern = f"{module}.{kernel}-*.nbi"
+    custom = os.environ.get("NUMBA_CACHE_DIR")
+    if custom:
+        return any(Path(custom).rglob(pattern))
+    return any((Path(__file__).parent / "kernels" / "__pycache__").glob(pattern))
+
+
+def _cache_writable() -> bool:
+    """True when numba can keep what the warm-up compiles (else it compiles for nothing)."""
+    custom = os.environ.get("NUMBA_CACHE_DIR")
+    folder = Path(custom) if custom else Path(__file__).parent / "kernels"
+    return os.access(folder, os.W_OK)
 
 
 def start() -> subprocess.Popen | None:
     """Start :func:`tiny_job` in a low-priority background process, unless not needed.
 
-    Returns the process (None when the cache is warm, ``NBCALIB_NO_WARMUP`` is set, or it
-    cannot be started). It is never waited for: the job it helps does not depend on it.
+    Returns the process (None when the cache is warm or cannot be written,
+    ``NBCALIB_NO_WARMUP`` is set, or it cannot be started). It is never waited for: the job
+    it helps does not depend on it.
     """
-    if os.environ.get("NBCALIB_NO_WARMUP") or cache_is_warm():
+    if os.environ.get("NBCALIB_NO_WARMUP") or cache_is_warm() or not _cache_writable():
         return None
 
     def lower_priority():  # runs in the child before exec
