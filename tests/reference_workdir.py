@@ -39,6 +39,7 @@ import numpy as np
 from nbcalib.camera import CameraModel, create_camera
 from nbcalib.matching.views import render_view
 from nbcalib.transforms import make_T
+from tests.test_matching_multiview import _cylinder
 
 __all__ = ["IRIDESCENCE_PLY_HEADER", "ReferenceWorkdir", "write_reference_workdir"]
 
@@ -103,14 +104,7 @@ class ReferenceWorkdir:
 def _scene(rng, lidar: str, n: int, radius: float = 8.0):
     """The textured cylinder wall around the LiDAR (raw intensities in [0, 1])."""
     half = math.pi if lidar == "spinning" else math.radians(35.0)
-    phi = rng.uniform(-half, half, n)
-    z = rng.uniform(-3.0, 3.0, n)
-    points = np.column_stack([radius * np.cos(phi), radius * np.sin(phi), z])
-    texture = cv2.GaussianBlur(rng.uniform(0.0, 1.0, (150, 1256)).astype(np.float32), (0, 0), 4.0)
-    texture = (texture - texture.min()) / (texture.max() - texture.min())
-    rows = np.minimum(((z + 3.0) / 6.0 * 150).astype(np.int64), 149)
-    cols = np.minimum(((phi + np.pi) / (2 * np.pi) * 1256).astype(np.int64), 1255)
-    return points, texture[rows, cols].astype(np.float64)
+    return _cylinder(rng, n, radius, half)
 
 
 def _equalise(raw: np.ndarray) -> np.ndarray:

@@ -95,11 +95,14 @@ def test_fill_index_takes_existing_rows_within_the_radius():
     assert np.array_equal(_fill_index(index, 0), index)
 
 
-def _cylinder(rng, n=250_000, radius=8.0):
-    """A textured cylinder wall around the LiDAR: intensities from blurred noise on (phi, z)."""
+def _cylinder(rng, n=250_000, radius=8.0, half=np.pi):
+    """A textured cylinder wall around the LiDAR: intensities from blurred noise on (phi, z).
+
+    ``half``: the wall's half-angle about LiDAR +x (pi: all around).
+    """
     import cv2
 
-    phi = rng.uniform(-np.pi, np.pi, n)
+    phi = rng.uniform(-half, half, n)
     z = rng.uniform(-3.0, 3.0, n)
     points = np.column_stack([radius * np.cos(phi), radius * np.sin(phi), z])
     # texture cells of ~4 cm, blobs of ~0.3 m: corners for the keypoint detectors

@@ -207,43 +207,42 @@ def find_correspondences(
             for ppd in cfg.retry_pixels_per_degree
         ]
         best = None
-        display = Progress(label=f"find-matches {pair.name}", enabled=progress, unit="")
-        for i, attempt in enumerate(settings):
-            offset = display.done
+        with Progress(label=f"find-matches {pair.name}", enabled=progress) as display:
+            for i, attempt in enumerate(settings):
+                offset = display.done
 
-            def view_done(k, n, i=i, offset=offset):
-                display.total = offset + n  # a retry's views are added as it starts
-                display.update(what=f"views (attempt {i + 1})")
+                def view_done(k, n, i=i, offset=offset):
+                    display.total = offset + n  # a retry's views are added as it starts
+                    display.update(what=f"views (attempt {i + 1})")
 
-            found = match_views(
-                camera,
-                pair.image,
-                pair.points_lidar,
-                pair.intensities,
-                attempt,
-                matcher=matcher,
-                guess_config=guess_config,
-                T_camera_lidar_prior=T_camera_lidar_prior,
-                seed=seed,
-                name=pair.name,
-                model_dir=model_dir,
-                progress=view_done,
-            )
-            ok, support = _guess_passes(camera, found.correspondences, guess_config, seed)
-            attempts.append(
-                {
-                    "pixels_per_degree": attempt.pixels_per_degree,
-                    "inpaint_deg": attempt.inpaint_deg,
-                    "correspondences": len(found.correspondences),
-                    "guess_ok": ok,
-                    "support": support,
-                }
-            )
-            if best is None or (ok, support) > best[0]:
-                best = ((ok, support), len(attempts) - 1, found)
-            if ok:
-                break
-        display.close()
+                found = match_views(
+                    camera,
+                    pair.image,
+                    pair.points_lidar,
+                    pair.intensities,
+                    attempt,
+                    matcher=matcher,
+                    guess_config=guess_config,
+                    T_camera_lidar_prior=T_camera_lidar_prior,
+                    seed=seed,
+                    name=pair.name,
+                    model_dir=model_dir,
+                    progress=view_done,
+                )
+                ok, support = _guess_passes(camera, found.correspondences, guess_config, seed)
+                attempts.append(
+                    {
+                        "pixels_per_degree": attempt.pixels_per_degree,
+                        "inpaint_deg": attempt.inpaint_deg,
+                        "correspondences": len(found.correspondences),
+                        "guess_ok": ok,
+                        "support": support,
+                    }
+                )
+                if best is None or (ok, support) > best[0]:
+                    best = ((ok, support), len(attempts) - 1, found)
+                if ok:
+                    break
         _, kept, views = best
         corr = views.correspondences
         info = {
