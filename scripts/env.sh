@@ -35,3 +35,21 @@ nbcalib_clear_stale_numba_cache() {
     echo "$stamp" > .numba_kernels_stamp
   fi
 }
+
+# The notebooks' 3-D views render off screen through VTK's EGL window, which needs Mesa's EGL
+# and DRI drivers (no X server). Install them with apt when we may; otherwise say how.
+nbcalib_ensure_egl() {
+  [ "$(uname -s)" = Linux ] || return 0
+  python -c 'import ctypes; ctypes.CDLL("libEGL.so.1")' 2>/dev/null && return 0
+  local sudo=""
+  [ "$(id -u)" -eq 0 ] || sudo="sudo -n"
+  if command -v apt-get >/dev/null && $sudo true 2>/dev/null; then
+    echo "[nbcalib] installing libegl1 libgl1-mesa-dri (off-screen 3-D views in the notebooks)"
+    if ! { $sudo apt-get update -qq && DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq \
+      libegl1 libgl1-mesa-dri >/dev/null; }; then
+      echo "[nbcalib] warning: could not install libegl1 libgl1-mesa-dri" >&2
+    fi
+  else
+    echo "[nbcalib] warning: no libEGL.so.1; the notebooks' 3-D views need: apt install libegl1 libgl1-mesa-dri" >&2
+  fi
+}

@@ -5,6 +5,7 @@ set -euo pipefail
 cd "$(dirname "${BASH_SOURCE[0]}")/.."
 source scripts/env.sh
 nbcalib_env dev
+nbcalib_ensure_egl
 nbcalib_clear_stale_numba_cache
 export MPLBACKEND=Agg
 echo "[nbcalib] ruff"
