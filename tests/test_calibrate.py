@@ -230,6 +230,12 @@ def test_hybrid_runs_nelder_mead_then_lbfgs_at_full_resolution(rng):
     assert result.history[0].level == 2
     assert all(h.level == 0 for h in result.history[first_lbfgs:])
     assert result.converged
+    # each outer iteration keeps the pose it ended at; moves between them are what it reports
+    np.testing.assert_array_equal(result.history[-1].T_camera_lidar, result.T_camera_lidar)
+    for before, step in zip([T_start] + [h.T_camera_lidar for h in result.history], result.history):
+        moved_m, moved_deg = pose_error(invert_T(step.T_camera_lidar), invert_T(before))
+        assert moved_m == pytest.approx(step.translation_change, abs=1e-12)
+        assert moved_deg == pytest.approx(step.rotation_change_deg, abs=1e-9)
     dt, dr = pose_error(invert_T(result.T_camera_lidar), np.eye(4))
     assert dt < 0.005 and dr < 0.05, (dt, dr)
     # well inside the default trust region (0.5 m / 5 deg): not on its edge

@@ -152,7 +152,7 @@ class RegistrationPair:
 
 @dataclass
 class OuterIteration:
-    """What one outer iteration did."""
+    """What one outer iteration did; ``T_camera_lidar`` is the pose it ended at."""
 
     nid: float
     nid_start: float
@@ -165,6 +165,7 @@ class OuterIteration:
     message: str
     level: int = 0
     optimizer: str = "lbfgs"
+    T_camera_lidar: np.ndarray | None = field(default=None, repr=False)
 
 
 @dataclass
@@ -513,5 +514,6 @@ def _outer_iteration(
         message=inner.message,
         level=level,
         optimizer=config.optimizer,
+        T_camera_lidar=T_new.copy(),
     )
     return step, T_new
