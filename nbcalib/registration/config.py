@@ -44,7 +44,7 @@ class RefineConfig:
     window : int
         Half-size of the pixel neighbourhood of the visibility test (0 = own pixel).
     max_outer : int
-        Outer iterations at most per pyramid level (10).
+        Outer iterations at most per pyramid level, and per optimiser of the hybrid (10).
     max_translation, max_rotation_deg : float
         Trust box of one outer iteration around its start pose (0.2 m, 2 degrees).
     converge_translation, converge_rotation_deg : float
