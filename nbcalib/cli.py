@@ -25,6 +25,7 @@ from nbcalib.errors import InputError
 COMMAND_MODULES = (
     "selfcheck",
     "synth",
+    "topics",
     "preprocess",
     "find_matches",
     "initial_guess",

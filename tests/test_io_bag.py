@@ -214,6 +214,37 @@ def test_topic_selection_errors(tmp_path, rng):
     assert read_tf_static(path) == []
 
 
+def test_topics_command_lists_and_says_what_preprocess_reads(tmp_path, rng, capsys):
+    from nbcalib.cli import main
+
+    path = tmp_path / "two.bag"
+    with BagWriter(path, "bag1") as bag:
+        for stamp in (1, 2):
+            bag.write_pointcloud("/velodyne_points", stamp, _cloud_fields(rng, 10), "lidar")
+        bag.write_pointcloud("/ouster/points", 1, _cloud_fields(rng, 10), "lidar")
+        bag.write_image("/image", 1, np.zeros((4, 4), np.uint8), "cam")
+    assert main(["topics", str(path)]) == 0
+    out = capsys.readouterr().out.splitlines()
+    assert out[0] == f"{path}: 3 topics"
+    rows = {line.split()[0]: line.split()[1:] for line in out[1:4]}
+    assert rows == {
+        "/image": ["sensor_msgs/msg/Image", "1", "messages"],
+        "/ouster/points": ["sensor_msgs/msg/PointCloud2", "1", "messages"],
+        "/velodyne_points": ["sensor_msgs/msg/PointCloud2", "2", "messages"],
+    }
+    reads = "\n".join(out[4:])
+    assert "point cloud:  one of /ouster/points, /velodyne_points: name it with --points-topic" in (
+        reads
+    )
+    assert "image:        /image" in reads
+    assert "camera info:  nothing: no camera info topic" in reads
+    # a bad bag: the one-line error, exit 2
+    (tmp_path / "junk.bag").write_bytes(b"#ROSBAG V2.0\n" + bytes(100))
+    assert main(["topics", str(tmp_path / "junk.bag")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "junk.bag" in err[0] and "cannot open as a ROS bag" in err[0]
+
+
 def test_bad_bags_raise_input_error(tmp_path):
     with pytest.raises(InputError, match="bag not found") as info:
         list_topics(tmp_path / "missing.bag")
