@@ -122,9 +122,7 @@ print(sorted(p.name for p in RECORDING.iterdir()))
 #
 # nbcalib reads bags without ROS (the pure-Python `rosbags` package). To see what a bag holds,
 # ask `rosbags` directly (the naive way), or nbcalib's reader, `nbcalib.io.bag.open_bag`, which
-# the command line uses: the same topics, types and message counts. (nbcalib has no command
-# for this; `nbcalib preprocess` names the candidates when a bag has several topics of a kind
-# and you gave none.)
+# the command line uses: the same topics, types and message counts.
 
 # %%
 from rosbags.highlevel import AnyReader  # the naive way
@@ -145,6 +143,14 @@ same_topics = naive_topics(BAG) == topics
 print(f"{BAG.name}: (rosbags and nbcalib agree: {same_topics})")
 for topic, (msgtype, count) in topics.items():
     print(f"  {topic:40s} {msgtype:30s} {count:3d} messages")
+
+# %% [markdown]
+# On the command line, `nbcalib topics BAG` prints the same list, and which topic `preprocess`
+# would read for each kind: the one topic of that kind, or, when there are several, the option
+# that names one (`--points-topic`, `--image-topic`, `--camera-info-topic`).
+
+# %%
+topics_status, topics_text = nbcalib_cli("topics", BAG)
 
 # %% [markdown]
 # A real bag looks the same. When nbcalib's developers' copy of the real data is there

@@ -780,6 +780,11 @@ def check_your_own_sensors(ns):
     assert set(topics) == {"/camera_info", "/image", "/points", "/tf_static"}, topics
     assert topics["/points"] == ("sensor_msgs/msg/PointCloud2", 5)  # 0.5 s at 10 Hz
     assert topics["/image"][1] == 1
+    # ... and `nbcalib topics` lists them and names the ones preprocess reads
+    assert ns["topics_status"] == 0
+    text = ns["topics_text"]
+    assert all(topic in text for topic in topics), text
+    assert "point cloud:  /points" in text and "camera info:  /camera_info" in text, text
     for name, bag_topics in ns["real_topics"].items():  # the KITTI bags, when present
         assert bag_topics["/kitti/velo/pointcloud"] == ("sensor_msgs/msg/PointCloud2", 5), name
 
