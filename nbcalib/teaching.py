@@ -1,10 +1,11 @@
 """What the teaching notebooks (``notebooks/``) share: their quick mode and their 3-D views.
 
-The notebooks open interactive 3-D views in JupyterLab (pyvista, from ``nbcalib[notebooks]``).
-Where there is no display (CI, a server, the test suite), a view is rendered off screen through
-VTK's EGL window, which needs only Mesa's ``libegl1`` and ``libgl1-mesa-dri`` (no X server, no
-Xvfb), and shown as a still image with matplotlib, so that it appears in the notebook's outputs
-like any other figure.
+The notebooks' 3-D views (pyvista, from ``nbcalib[notebooks]``) can be turned in JupyterLab,
+through pyvista's notebook backend, on a desktop or on a server. In the tests and CI (the quick
+mode), and in scripts where no window can open, a view is rendered off screen and shown as a
+still image with matplotlib, so that it appears in the outputs like any other figure. Without
+a display, VTK renders through its EGL window, which needs only Mesa's ``libegl1`` and
+``libgl1-mesa-dri`` (no X server, no Xvfb).
 
     from nbcalib.teaching import is_quick, plotter, show
 
@@ -22,7 +23,15 @@ import sys
 
 import numpy as np
 
-__all__ = ["egl_available", "is_quick", "off_screen", "plotter", "show"]
+__all__ = [
+    "egl_available",
+    "has_display",
+    "in_jupyter",
+    "is_quick",
+    "off_screen",
+    "plotter",
+    "show",
+]
 
 
 def is_quick() -> bool:
@@ -30,17 +39,30 @@ def is_quick() -> bool:
     return os.environ.get("NBCALIB_NOTEBOOK_QUICK") == "1"
 
 
-def off_screen() -> bool:
-    """Whether 3-D views are rendered to still images rather than opened interactively.
+def in_jupyter() -> bool:
+    """Whether this code runs in a Jupyter kernel (JupyterLab, Notebook, VS Code notebooks)."""
+    shell = sys.modules.get("IPython") and sys.modules["IPython"].get_ipython()
+    return type(shell).__name__ == "ZMQInteractiveShell"
 
-    Off screen under the quick mode, with ``PYVISTA_OFF_SCREEN=true``, or on Linux without a
-    display; interactive otherwise (JupyterLab on a desktop).
+
+def has_display() -> bool:
+    """Whether a window can open: not Linux, or Linux with an X or Wayland display."""
+    if not sys.platform.startswith("linux"):
+        return True
+    return bool(os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY"))
+
+
+def off_screen() -> bool:
+    """Whether 3-D views become still images rather than views you can turn.
+
+    Still images under the quick mode or with ``PYVISTA_OFF_SCREEN=true`` (the tests, CI), and
+    outside Jupyter where no window can open (a script on a server). In a Jupyter kernel the
+    view is interactive (pyvista's notebook backend: trame, from ``nbcalib[notebooks]``), also
+    on a server without a display; on a desktop outside Jupyter it opens a window.
     """
     if is_quick() or os.environ.get("PYVISTA_OFF_SCREEN", "").lower() == "true":
         return True
-    return sys.platform.startswith("linux") and not (
-        os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
-    )
+    return not in_jupyter() and not has_display()
 
 
 def egl_available() -> bool:
@@ -55,35 +77,39 @@ def egl_available() -> bool:
 
 
 def plotter(window_size=(900, 600), **kwargs):
-    """A ``pyvista.Plotter``, off screen where :func:`off_screen` says; None without pyvista.
+    """A ``pyvista.Plotter`` for :func:`show`; None (and a message) without pyvista or EGL.
 
-    Off screen, VTK is told to use its EGL window (``VTK_DEFAULT_OPENGL_WINDOW``), unless the
-    variable is already set: VTK's X window would fail without an X server.
+    Where no display is (CI, a server, JupyterLab on a server), VTK is told to render through
+    its EGL window (``VTK_DEFAULT_OPENGL_WINDOW``, unless already set): its X window would fail
+    without an X server.
     """
     try:
         import pyvista as pv
     except ImportError:
         print("pyvista is not installed, so no 3-D view: pip install 'nbcalib[notebooks]'")
         return None
-    hidden = off_screen()
-    if hidden and sys.platform.startswith("linux"):
+    still = off_screen()
+    if not has_display():
         if not egl_available():
             print(
-                "no 3-D view: rendering off screen needs Mesa's EGL "
+                "no 3-D view: rendering without a display needs Mesa's EGL "
                 "(apt install libegl1 libgl1-mesa-dri)"
             )
             return None
         os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
-    return pv.Plotter(off_screen=hidden, window_size=list(window_size), **kwargs)
+    notebook = in_jupyter() and not still
+    pl = pv.Plotter(off_screen=still, notebook=notebook, window_size=list(window_size), **kwargs)
+    pl._nbcalib_still = still  # what show() does with it
+    return pl
 
 
 def show(pl, title: str | None = None) -> np.ndarray | None:
-    """Show a plotter: interactively, or off screen as a still matplotlib figure.
+    """Show a plotter from :func:`plotter`: a view to turn, or a still matplotlib figure.
 
-    Returns the rendered (H, W, 3) uint8 image off screen (the notebooks' tests check that it
-    is not blank), None when the view opened interactively.
+    Returns the rendered (H, W, 3) uint8 image when still (the notebooks' tests check that it
+    is not blank), None when the view is interactive (a notebook widget or a window).
     """
-    if not pl.off_screen:
+    if not getattr(pl, "_nbcalib_still", pl.off_screen):
         pl.show(title=title)
         return None
     image = np.asarray(pl.screenshot(return_img=True))

@@ -238,11 +238,13 @@ if found.best >= 0:
     canvas[:h0, :width], canvas[:h1, width:] = seq.image, best.view.intensity
     fig, ax = plt.subplots(figsize=(15, 5.5))
     ax.imshow(canvas, cmap="gray")
-    for (u0, v0), (u1, v1), good in zip(bc.uv_camera, bc.uv_lidar, right):
-        ax.plot([u0, u1 + width], [v0, v1], color="lime" if good else "red", lw=0.7)
+    drawn = np.random.default_rng(0).permutation(len(right))[:150]  # a legible sample
+    for k in drawn:
+        (u0, v0), (u1, v1) = bc.uv_camera[k], bc.uv_lidar[k]
+        ax.plot([u0, u1 + width], [v0, v1], color="lime" if right[k] else "red", lw=0.7)
     ax.set_title(
         f"camera image | LiDAR view at heading {best.view.heading_deg:.0f} deg: "
-        f"{true_matches} of {len(right)} matches right (green)"
+        f"{true_matches} of {len(right)} matches right (green; {len(drawn)} drawn)"
     )
     ax.set_axis_off()
     fig.tight_layout()
@@ -254,9 +256,10 @@ if found.best >= 0:
 # scene, a weak matcher, a LiDAR and a camera that see too little in common), do not feed it
 # to fine registration. Click a few correspondences instead: the JupyterLab picker
 # `nbcalib.initial_guess.picker.ManualPicker` (notebook 10 shows it) writes a file that
-# `nbcalib initial-guess WORK --manual picks.json` reads. Eight picks spread over the image are
-# plenty. Here the picks are simulated: eight LiDAR points in view, their pixels under the true
-# extrinsic, plus 1.5 px of hand jitter.
+# `nbcalib initial-guess WORK --manual picks.json` reads. Eight picks are plenty, if they are
+# spread over the image (and over near and far things). Here the picks are simulated: LiDAR
+# points in view, their pixels under the true extrinsic, plus 1.5 px of hand jitter; once
+# spread (one in each cell of a 4 x 2 grid over the image), once bunched on one spot of a wall.
 
 # %%
 from nbcalib.initial_guess.config import InitialGuessConfig
@@ -267,21 +270,52 @@ uv_all, in_view = seq.camera.project(
     points @ seq.T_camera_lidar[:3, :3].T + seq.T_camera_lidar[:3, 3], in_image=True
 )
 far_enough = in_view & (np.linalg.norm(points, axis=1) > 1.5)
-picked = rng.choice(np.flatnonzero(far_enough), size=8, replace=False)
-picks = [
-    ManualCorrespondence(camera_uv=uv_all[i] + rng.normal(0, 1.5, 2), point_lidar=points[i])
-    for i in picked
-]
-manual_guess = estimate_initial_guess(
-    seq.camera,
-    np.array([p.camera_uv for p in picks]),
-    np.array([p.point_lidar for p in picks]),
-    seed=0,
-    # as `initial-guess --manual`: picks are few but trusted, 3 inliers make a success
-    min_inliers=InitialGuessConfig().min_manual_inliers,
-)
-manual_error = pose_errors(manual_guess.T_camera_lidar, seq.T_camera_lidar)
-print("from 8 picks: success flag", manual_guess.success, manual_error)
+column = np.floor(4 * uv_all[:, 0] / seq.camera.width)
+row = np.floor(2 * uv_all[:, 1] / seq.camera.height)
+cells = [far_enough & (column == c) & (row == r) for r in range(2) for c in range(4)]
+spread = np.array([rng.choice(np.flatnonzero(cell)) for cell in cells if cell.any()])
+spot = points[rng.choice(np.flatnonzero(far_enough))]  # one spot; its neighbours within 40 cm
+near_spot = np.flatnonzero(far_enough & (np.linalg.norm(points - spot, axis=1) < 0.4))
+bunched = rng.choice(near_spot, size=min(8, len(near_spot)), replace=False)
+
+
+def guess_from_picks(picked):
+    """The initial guess from simulated picks of the points ``picked``, as `--manual` makes it."""
+    picks = [
+        ManualCorrespondence(camera_uv=uv_all[i] + rng.normal(0, 1.5, 2), point_lidar=points[i])
+        for i in picked
+    ]
+    guess = estimate_initial_guess(
+        seq.camera,
+        np.array([p.camera_uv for p in picks]),
+        np.array([p.point_lidar for p in picks]),
+        seed=0,
+        # as `initial-guess --manual`: picks are few but trusted, 3 inliers make a success
+        min_inliers=InitialGuessConfig().min_manual_inliers,
+    )
+    return picks, guess, pose_errors(guess.T_camera_lidar, seq.T_camera_lidar)
+
+
+picks, manual_guess, manual_error = guess_from_picks(spread)
+print(f"{len(picks)} spread picks : success {manual_guess.success},", manual_error)
+bunched_picks, bunched_guess, bunched_error = guess_from_picks(bunched)
+print(f"{len(bunched_picks)} bunched picks: success {bunched_guess.success},", bunched_error)
+print("   ", bunched_guess.failure)
+
+fig, ax = plt.subplots(figsize=(8, 6))
+ax.imshow(seq.image, cmap="gray")
+for chosen, colour, label in ((spread, "lime", "spread"), (bunched, "red", "bunched")):
+    ax.scatter(*uv_all[chosen].T, s=60, facecolors="none", edgecolors=colour, lw=2, label=label)
+verdicts = ["success" if g.success else "flagged" for g in (manual_guess, bunched_guess)]
+ax.set_title(f"simulated picks: spread ({verdicts[0]}) and bunched ({verdicts[1]})")
+ax.legend(loc="lower right")
+ax.set_axis_off()
+fig.tight_layout()
+
+# %% [markdown]
+# Picks bunched on one spot fit many poses equally well: a pose rotated by degrees explains
+# them as well as the right one, and the guess's test says "not distinct" instead of passing
+# on a wrong start. Spread picks pin the pose down.
 
 # %% [markdown]
 # From the command line: `nbcalib find-matches WORK` (views by default; `--prior` aims them)
@@ -303,4 +337,5 @@ print("from 8 picks: success flag", manual_guess.success, manual_error)
 #   estimates end within a centimetre;
 # - the best view is the one with the most RANSAC support, and a guess flagged as a success is
 #   within 2 degrees and 10 cm of the truth;
-# - eight simulated manual picks give a guess within a degree and 10 cm.
+# - eight simulated manual picks spread over the image give a guess within a degree and 10 cm;
+#   bunched on one spot, the guess fails its test.
