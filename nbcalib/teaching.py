@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import os
 import sys
+from pathlib import Path
 
 import numpy as np
 
@@ -28,8 +29,10 @@ __all__ = [
     "has_display",
     "in_jupyter",
     "is_quick",
+    "nbcalib_command",
     "off_screen",
     "plotter",
+    "real_data_dir",
     "show",
 ]
 
@@ -37,6 +40,54 @@ __all__ = [
 def is_quick() -> bool:
     """Whether the notebooks should run on small data (``NBCALIB_NOTEBOOK_QUICK=1``, as in CI)."""
     return os.environ.get("NBCALIB_NOTEBOOK_QUICK") == "1"
+
+
+def real_data_dir() -> Path:
+    """The real recordings nbcalib's developers keep beside the repository (not shipped).
+
+    ``$NBCALIB_REAL_DATA`` if set; else ``../shared/data/real`` beside the repository this
+    module (an editable install) or the working folder's project lives in, the first that
+    exists; else that first place, which does not exist (callers then fall back and say so).
+    """
+    if os.environ.get("NBCALIB_REAL_DATA"):
+        return Path(os.environ["NBCALIB_REAL_DATA"])
+    tail = Path("shared", "data", "real")
+    candidates = [Path(__file__).resolve().parents[2] / tail]  # <repo>/nbcalib/teaching.py
+    cwd = Path.cwd().resolve()
+    candidates += [folder / tail for folder in (cwd.parent, cwd.parent.parent)]  # notebooks/
+    return next((c for c in candidates if c.is_dir()), candidates[0])
+
+
+def nbcalib_command(*words) -> tuple[int, str]:
+    """Run ``nbcalib WORDS`` as typed in a terminal, in this process; print it and its output.
+
+    What a terminal shows: the command line, then what it prints (its progress lines go to
+    stderr as in a terminal), and the exit status when it is not 0. Returns ``(status,
+    stdout)``. The ``nbcalib`` logger is left as it was found.
+    """
+    import contextlib
+    import io
+    import logging
+    import shlex
+
+    from nbcalib.cli import main
+
+    words = [str(w) for w in words]
+    print("$ nbcalib", shlex.join(words))
+    out = io.StringIO()
+    logger = logging.getLogger("nbcalib")
+    handlers, level = list(logger.handlers), logger.level
+    try:
+        with contextlib.redirect_stdout(out):
+            status = main(words)
+    finally:
+        logger.handlers[:] = handlers
+        logger.setLevel(level)
+    text = out.getvalue()
+    print(text, end="" if text.endswith("\n") or not text else "\n")
+    if status:
+        print(f"(exit status {status})")
+    return status, text
 
 
 def in_jupyter() -> bool:

@@ -26,7 +26,6 @@
 
 # %%
 import io
-import os
 from pathlib import Path
 
 import matplotlib.pyplot as plt
@@ -42,7 +41,7 @@ from nbcalib.io.pointcloud2 import pointcloud2_to_fields
 from nbcalib.preprocess.intensity import equalize_point_intensities
 from nbcalib.synthetic import RigConfig, generate_sequence
 from nbcalib.synthetic.writer import BASE_STAMP_NS, TOPICS, export_dataset, write_sequence_bag
-from nbcalib.teaching import is_quick, plotter, show
+from nbcalib.teaching import is_quick, plotter, real_data_dir, show
 from nbcalib.transforms import transform_points
 
 QUICK = is_quick()  # smaller data when the test suite runs the notebooks
@@ -479,11 +478,7 @@ if pl is not None:
 # `x, y, z, reflectance`, no header, no time, no ring) and the same frame from a ROS 1 bag.
 
 # %%
-try:
-    REPO = Path(__file__).resolve().parents[1]
-except NameError:  # in Jupyter, the working directory is notebooks/
-    REPO = Path.cwd().parent
-REAL = Path(os.environ.get("NBCALIB_REAL_DATA", REPO.parent / "shared" / "data" / "real"))
+REAL = real_data_dir()  # $NBCALIB_REAL_DATA, else ../shared/data/real beside the project
 kitti_bin = REAL / "kitti_raw_2011_09_26" / "0000000000" / "velodyne.bin"
 kitti_bag = REAL / "bags" / "kitti_2011_09_26_udacity_5frames.bag"
 kitti = kitti_from_bag = None

@@ -31,12 +31,7 @@
 # happens on *this* run; the sentences about it are computed from the numbers.
 
 # %%
-import contextlib
-import io
 import json
-import logging
-import os
-import shlex
 import shutil
 import tempfile
 from pathlib import Path
@@ -45,7 +40,6 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import nbcalib
-from nbcalib.cli import main as nbcalib_main
 from nbcalib.io.calib_json import read_calib_json, read_ground_truth
 from nbcalib.io.camera_file import load_camera
 from nbcalib.io.image import read_image
@@ -53,36 +47,20 @@ from nbcalib.io.pointcloud import read_pointcloud
 from nbcalib.metrics import pose_errors
 from nbcalib.reference import camera as reference_camera
 from nbcalib.reference.lie import so3_exp
-from nbcalib.teaching import is_quick
+from nbcalib.teaching import is_quick, real_data_dir
 from nbcalib.transforms import invert_T, make_T, pose_to_xyz_quat
 
 QUICK = is_quick()
 
 # %% [markdown]
-# The notebook types `nbcalib` commands as you would in a terminal. `nbcalib_cli` runs one in
-# this process (`nbcalib.cli.main` with the words a shell would pass, which gives the same
-# output as the terminal, without starting Python again) and prints it before its output.
+# The notebook types `nbcalib` commands as you would in a terminal.
+# `nbcalib.teaching.nbcalib_command` runs one in this process (`nbcalib.cli.main` with the
+# words a shell would pass, which gives the same output as the terminal, without starting
+# Python again) and prints it before its output.
 
 
 # %%
-def nbcalib_cli(*words):
-    """Run ``nbcalib WORDS`` as typed in a shell; print it and its output; (status, stdout)."""
-    words = [str(w) for w in words]
-    print("$ nbcalib", shlex.join(words))
-    out = io.StringIO()
-    logger = logging.getLogger("nbcalib")  # the command logs its progress to stderr: undone after
-    handlers, level = list(logger.handlers), logger.level
-    try:
-        with contextlib.redirect_stdout(out):
-            status = nbcalib_main(words)
-    finally:
-        logger.handlers[:] = handlers
-        logger.setLevel(level)
-    print(out.getvalue(), end="" if out.getvalue().endswith("\n") else "\n")
-    if status:
-        print(f"(exit status {status})")
-    return status, out.getvalue()
-
+from nbcalib.teaching import nbcalib_command
 
 # %% [markdown]
 # ## Where the data is
@@ -95,8 +73,7 @@ def nbcalib_cli(*words):
 # the numbers differ.
 
 # %%
-here = Path(globals().get("__file__", "09_real_data.py")).resolve().parent
-DATA = Path(os.environ.get("NBCALIB_REAL_DATA") or here.parents[1] / "shared" / "data" / "real")
+DATA = real_data_dir()  # $NBCALIB_REAL_DATA, else ../shared/data/real beside the project
 KITTI_DIR = DATA / "kitti_raw_2011_09_26"
 PJLAB_DIR = DATA / "pjlab" / "auto_calib"
 REAL = KITTI_DIR.is_dir() and PJLAB_DIR.is_dir()
@@ -135,7 +112,7 @@ else:
         out = TMP / f"synthetic_{name}"
         synth = ["-q", "synth", str(out), "--lidar", "spinning64", "--camera", camera_model]
         synth += ["--scene", "street", "--motion", "static", "--duration", "0.1"]
-        nbcalib_cli(*synth, "--image-size", size, "--seed", str(seed))
+        nbcalib_command(*synth, "--image-size", size, "--seed", str(seed))
         stand_ins[name] = {
             "points": out / "pair_000.pcd",
             "image": out / "pair_000.png",
@@ -328,7 +305,7 @@ fig.tight_layout()
 # nbcalib report work/                                    # verdict, uncertainty, figures
 # ```
 #
-# We run exactly these commands here, with the helper `nbcalib_cli` defined at the top.
+# We run exactly these commands here, through `nbcalib_command` (imported at the top).
 
 # %% [markdown]
 # ### The start: 1 degree and 5 cm off the reference
@@ -381,15 +358,15 @@ def run_kitti_frame(k):
     """The four commands on KITTI frame k; the numbers they wrote."""
     f = kitti[k]
     work = TMP / f"kitti_{k:02d}"
-    nbcalib_cli(
+    nbcalib_command(
         "preprocess", "--points", f["points"], "--image", f["image"], "--camera", f["camera"], work
     )
     init = init_argument(start_pose(read_ground_truth(f["reference"])))
     calibrate = ["calibrate", work, f"--init={init}"] + (["--max-outer", "2"] if QUICK else [])
-    status, _ = nbcalib_cli(*calibrate)
+    status, _ = nbcalib_command(*calibrate)
     assert status == 0, "calibrate failed"
-    _, line = nbcalib_cli("evaluate", work, "--ground-truth", f["reference"])
-    nbcalib_cli("report", work)
+    _, line = nbcalib_command("evaluate", work, "--ground-truth", f["reference"])
+    nbcalib_command("report", work)
     calib = read_calib_json(work / "calib.json")
     return {
         "work": work,
@@ -594,7 +571,7 @@ fig.tight_layout()
 
 # %%
 auto_work = TMP / "kitti_auto"
-nbcalib_cli(
+nbcalib_command(
     "preprocess",
     "--points",
     frame["points"],
@@ -604,13 +581,13 @@ nbcalib_cli(
     frame["camera"],
     auto_work,
 )
-nbcalib_cli("find-matches", auto_work, *(["--no-retries"] if QUICK else []))
-auto_status, _ = nbcalib_cli("initial-guess", auto_work)
+nbcalib_command("find-matches", auto_work, *(["--no-retries"] if QUICK else []))
+auto_status, _ = nbcalib_command("initial-guess", auto_work)
 
 # %%
 if auto_status != 0:
     print("the guess failed its test; written anyway to measure it:")
-    nbcalib_cli("initial-guess", auto_work, "--force")
+    nbcalib_command("initial-guess", auto_work, "--force")
 auto_calib = read_calib_json(auto_work / "calib.json")
 auto_record = auto_calib.nbcalib["initial_guess"]["init_T_lidar_camera_auto"]
 auto_success = bool(auto_record["success"])

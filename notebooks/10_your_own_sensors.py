@@ -30,12 +30,7 @@
 # was. With your own bag you skip that step (or compare with a calibration you trust).
 
 # %%
-import contextlib
-import io
 import json
-import logging
-import os
-import shlex
 import shutil
 import tempfile
 from pathlib import Path
@@ -44,7 +39,6 @@ import cv2
 import matplotlib.pyplot as plt
 import numpy as np
 
-from nbcalib.cli import main as nbcalib_main
 from nbcalib.initial_guess.picker import ManualPicker
 from nbcalib.io.bag import open_bag, read_images
 from nbcalib.io.calib_json import read_calib_json, read_ground_truth
@@ -53,7 +47,7 @@ from nbcalib.io.image import read_image
 from nbcalib.matching.correspondences import lift_lidar_pixels
 from nbcalib.metrics import pose_errors
 from nbcalib.preprocess.lidar_image import visible_mask
-from nbcalib.teaching import is_quick, plotter, show
+from nbcalib.teaching import is_quick, plotter, real_data_dir, show
 from nbcalib.workdir import WorkDir, get_virtual_camera
 
 QUICK = is_quick()
@@ -61,30 +55,13 @@ TMP = Path(tempfile.mkdtemp(prefix="nbcalib_10_"))  # everything this notebook w
 print("working in", TMP)
 
 # %% [markdown]
-# `nbcalib_cli` runs one `nbcalib` command in this process, with the words a shell would pass
+# `nbcalib_command` runs one `nbcalib` command in this process, with the words a shell would pass
 # (`nbcalib.cli.main`; a terminal prints the same), and prints the command before its output.
 # In a terminal you would type the same words after `nbcalib`.
 
 
 # %%
-def nbcalib_cli(*words):
-    """Run ``nbcalib WORDS`` as typed in a shell; print it and its output; (status, stdout)."""
-    words = [str(w) for w in words]
-    print("$ nbcalib", shlex.join(words))
-    out = io.StringIO()
-    logger = logging.getLogger("nbcalib")  # the command logs its progress to stderr: undone after
-    handlers, level = list(logger.handlers), logger.level
-    try:
-        with contextlib.redirect_stdout(out):
-            status = nbcalib_main(words)
-    finally:
-        logger.handlers[:] = handlers
-        logger.setLevel(level)
-    print(out.getvalue(), end="" if out.getvalue().endswith("\n") else "\n")
-    if status:
-        print(f"(exit status {status})")
-    return status, out.getvalue()
-
+from nbcalib.teaching import nbcalib_command
 
 # %% [markdown]
 # ## The recording
@@ -97,7 +74,7 @@ def nbcalib_cli(*words):
 
 # %%
 RECORDING = TMP / "recording"
-nbcalib_cli(
+nbcalib_command(
     "synth",
     RECORDING,
     "--format",
@@ -150,7 +127,7 @@ for topic, (msgtype, count) in topics.items():
 # that names one (`--points-topic`, `--image-topic`, `--camera-info-topic`).
 
 # %%
-topics_status, topics_text = nbcalib_cli("topics", BAG)
+topics_status, topics_text = nbcalib_command("topics", BAG)
 
 # %% [markdown]
 # A real bag looks the same. When nbcalib's developers' copy of the real data is there
@@ -158,11 +135,7 @@ topics_status, topics_text = nbcalib_cli("topics", BAG)
 # here are their topics too: a topic per sensor, with the names the KITTI driver chose.
 
 # %%
-here = Path(globals().get("__file__", "10_your_own_sensors.py")).resolve().parent
-REAL_BAGS = (
-    Path(os.environ.get("NBCALIB_REAL_DATA") or here.parents[1] / "shared" / "data" / "real")
-    / "bags"
-)
+REAL_BAGS = real_data_dir() / "bags"  # $NBCALIB_REAL_DATA, else ../shared/data/real
 real_topics = {}
 if REAL_BAGS.is_dir():
     for path in sorted(REAL_BAGS.iterdir()):
@@ -183,7 +156,7 @@ else:
 
 # %%
 WORK = TMP / "work"
-status, _ = nbcalib_cli(
+status, _ = nbcalib_command(
     "preprocess",
     BAG,
     WORK,
@@ -228,8 +201,8 @@ fig.tight_layout()
 # the retries at finer views (`--no-retries`).
 
 # %%
-nbcalib_cli("find-matches", WORK, *(["--no-retries"] if QUICK else []))
-auto_status, _ = nbcalib_cli("initial-guess", WORK)
+nbcalib_command("find-matches", WORK, *(["--no-retries"] if QUICK else []))
+auto_status, _ = nbcalib_command("initial-guess", WORK)
 # what initial-guess recorded (nothing when the guess failed: it writes no failed guess)
 auto_record = read_calib_json(WORK / "calib.json").nbcalib.get("initial_guess", {})
 auto_record = auto_record.get("init_T_lidar_camera_auto")
@@ -335,7 +308,7 @@ print(f"{len(picks)} picks; the named points project within {pixel_gap:.2f} px o
 # printed so you can see a bad click.
 
 # %%
-manual_status, _ = nbcalib_cli("initial-guess", WORK, "--manual", manual_file)
+manual_status, _ = nbcalib_command("initial-guess", WORK, "--manual", manual_file)
 assert manual_status == 0
 calib = read_calib_json(WORK / "calib.json")
 T_manual = calib.get_T_camera_lidar("init_T_lidar_camera")
@@ -368,8 +341,8 @@ print(f"solvePnP and initial-guess --manual differ by {pnp_cm:.2f} cm and {pnp_d
 # report. In quick mode at most two outer iterations per pyramid level (`--max-outer 2`).
 
 # %%
-nbcalib_cli("calibrate", WORK, *(["--max-outer", "2"] if QUICK else []))
-report_status, _ = nbcalib_cli("report", WORK)
+nbcalib_command("calibrate", WORK, *(["--max-outer", "2"] if QUICK else []))
+report_status, _ = nbcalib_command("report", WORK)
 calib = read_calib_json(WORK / "calib.json")
 T_result = calib.get_T_camera_lidar("T_lidar_camera")
 quality = calib.nbcalib["quality"]
@@ -400,7 +373,7 @@ for picture, title in ((report_overlay, "overlays"), (report_curves, "NID curves
 # %%
 evaluation = {}
 for stage in ("init_T_lidar_camera", "T_lidar_camera"):
-    _, line = nbcalib_cli("evaluate", WORK, "--ground-truth", GROUND_TRUTH, "--stage", stage)
+    _, line = nbcalib_command("evaluate", WORK, "--ground-truth", GROUND_TRUTH, "--stage", stage)
     evaluation[stage] = json.loads(line.strip().splitlines()[-1])
 guess_cm = 100 * evaluation["init_T_lidar_camera"]["translation_error_m"]
 guess_deg = evaluation["init_T_lidar_camera"]["rotation_error_deg"]
@@ -443,7 +416,7 @@ print(
 # `--parent-frame` and `--child-frame`.
 
 # %%
-nbcalib_cli(
+nbcalib_command(
     "export",
     WORK,
     "--format",

@@ -994,3 +994,29 @@ def test_teaching_renders_off_screen(monkeypatch):
         assert len(plt.get_fignums()) == before + 1  # shown as a still figure
     finally:
         plt.close("all")
+
+
+def test_teaching_runs_a_command_as_typed_and_leaves_the_logger(capsys, tmp_path):
+    import logging
+
+    from nbcalib import teaching
+
+    logger = logging.getLogger("nbcalib")
+    before = (list(logger.handlers), logger.level)
+    status, out = teaching.nbcalib_command("evaluate", tmp_path / "no such", "--ground-truth", "x")
+    printed = capsys.readouterr()
+    assert status == 2 and out == ""
+    assert printed.out.startswith("$ nbcalib evaluate ") and "--ground-truth x" in printed.out
+    assert "(exit status 2)" in printed.out and "work directory not found" in printed.err
+    assert (list(logger.handlers), logger.level) == before
+
+
+def test_teaching_finds_the_real_data(monkeypatch, tmp_path):
+    from nbcalib import teaching
+
+    monkeypatch.setenv("NBCALIB_REAL_DATA", str(tmp_path))
+    assert teaching.real_data_dir() == tmp_path
+    monkeypatch.delenv("NBCALIB_REAL_DATA")
+    beside = Path(teaching.__file__).resolve().parents[2] / "shared" / "data" / "real"
+    monkeypatch.chdir(tmp_path)  # a working folder of no project: the one beside the package
+    assert teaching.real_data_dir() == beside
