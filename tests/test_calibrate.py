@@ -19,9 +19,11 @@ from nbcalib.products import PairData
 from nbcalib.registration.refine import (
     RefineConfig,
     RegistrationPair,
+    build_cost,
     downscale_camera,
     downscale_image,
     refine,
+    visible_subset,
 )
 from nbcalib.registration.trust import TrustRegion
 from nbcalib.transforms import invert_T, pose_error, pose_from_xyz_quat, pose_to_xyz_quat, se3_exp
@@ -311,3 +313,48 @@ def test_trust_region_settings_are_checked_and_the_old_names_still_read():
             CalibrationConfig(),
             {"refine.max_total_translation": 0.3, "refine.trust_translation": 0.4},
         )
+
+
+# ------------------------------------------------------------------ a subset of the points
+
+
+def test_points_per_pixel_samples_a_fixed_nested_subset(rng):
+    cam = example_camera("plumb_bob", 320, 240)
+    image, points, intensities = textured_scene(cam, rng, n=60000, blur=0.8)
+    pair = RegistrationPair(cam, image, points, intensities)
+    visible = visible_subset(pair, np.eye(4), RefineConfig())
+    assert pair.sample(visible, None) is visible
+    assert pair.sample(visible, visible.size) is visible  # room for all: all, as before
+    fine, coarse = pair.sample(visible, 20000), pair.sample(visible, 5000)
+    for subset, budget in ((fine, 20000), (coarse, 5000)):
+        assert abs(subset.size - budget) < 5 * np.sqrt(budget)  # a binomial draw
+        assert np.isin(subset, visible).all()
+    assert np.isin(coarse, fine).all()  # nested across levels
+    np.testing.assert_array_equal(pair.sample(visible, 20000), fine)  # the same every time
+    rank = np.empty(int(visible.max()) + 1, dtype=np.int64)
+    rank[visible] = np.arange(visible.size)
+    assert np.all(np.diff(rank[fine]) > 0)  # in the order of `visible` (pixel order)
+
+
+def test_points_per_pixel_budget_has_a_floor_and_is_validated(rng):
+    cam = example_camera("plumb_bob", 320, 240)
+    image, points, intensities = textured_scene(cam, rng, n=30000, blur=0.8)
+    pair = RegistrationPair(cam, image, points, intensities)
+    T = se3_exp(np.array([0.01, 0.0, 0.0, 0.0, 0.005, 0.0]))
+    full, counts = build_cost([pair], T, RefineConfig(orientation_classes=False))
+    # 0.01 points per pixel of 320 x 240 would be 768 points; the floor keeps every one of the
+    # visible points here, so the cost is the same to the bit
+    floored, counts2 = build_cost(
+        [pair], T, RefineConfig(orientation_classes=False, points_per_pixel=0.01)
+    )
+    assert counts == counts2 and floored.value(T) == full.value(T)
+    small, _ = build_cost(
+        [pair],
+        T,
+        RefineConfig(orientation_classes=False, points_per_pixel=0.01, min_sampled_points=1000),
+    )
+    assert small.costs[0].xyz.shape[1] < 0.2 * full.costs[0].xyz.shape[1]
+    assert abs(small.value(T) - full.value(T)) < 0.05  # a noisier estimate of the same NID
+    for bad in ({"points_per_pixel": 0.0}, {"points_per_pixel": -1.0}, {"min_sampled_points": 0}):
+        with pytest.raises(ValueError):
+            RefineConfig(**bad)

@@ -204,6 +204,9 @@ REFINE = (
     Option("--bins", "refine.bins", "NID histogram bins", "N"),
     Option("--structure-weight", "refine.structure_weight",
            "weight of the depth-edge / image-edge NID beside the intensity NID (0: off)", "W"),
+    Option("--points-per-pixel", "refine.points_per_pixel",
+           "points per pixel of each pyramid level the NID uses, a fixed random subset of the "
+           "visible points (none: all)", "P"),
     Option("--max-outer", "refine.max_outer",
            "outer iterations at most, per pyramid level and per optimiser of the hybrid", "N"),
     Option("--depth-margin", "refine.depth_margin", "visibility depth margin, metres", "M"),

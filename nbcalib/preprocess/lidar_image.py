@@ -414,6 +414,7 @@ def visible_indices(
     *,
     margin: float = 0.1,
     window: int = 0,
+    select=None,
 ) -> np.ndarray:
     """Indices of the points :func:`visible_mask` keeps, ordered by their pixel (row-major).
 
@@ -429,6 +430,9 @@ def visible_indices(
     ----------
     camera, T_camera_lidar, points_lidar, margin, window
         As :func:`visible_mask`.
+    select : callable, optional
+        Takes the visible indices in cloud order and returns the ones to keep (a subset, in
+        the same order); applied before the sort, which then sorts only those.
 
     Returns
     -------
@@ -438,6 +442,8 @@ def visible_indices(
     T, points = _check_inputs(camera, T_camera_lidar, points_lidar, "T_camera_lidar")
     mask, pixel = _visibility(camera, T, points, margin, window)
     keep = np.flatnonzero(mask)
+    if select is not None:
+        keep = select(keep)
     return keep[np.argsort(pixel[keep], kind="stable")]
 
 

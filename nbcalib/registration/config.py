@@ -92,6 +92,16 @@ class RefineConfig:
         Multithreaded NID kernels (same values; slower in CPU time on a loaded machine).
     max_pairs : int or None
         Register only the first ``max_pairs`` pairs of a job (None: all).
+    points_per_pixel : float or None
+        Points of each pair the NID uses at a pyramid level: at most this many per pixel of
+        that level's image, but never fewer than ``min_sampled_points``; a seeded random subset
+        of the visible points (the same points for every pose, nested across levels). None
+        uses every visible point. A 16 x 16 joint histogram needs far fewer than the 1-2
+        million points a dense cloud puts in view (issue 19; not the default until its
+        accuracy is measured).
+    min_sampled_points : int
+        The floor of ``points_per_pixel``'s budget (50 000): a pair with fewer visible points
+        (a single real scan) keeps all of them at every level.
     min_visible_points : int
         Fewer LiDAR points than this in the images at a pose being refined is refused (a user
         error: the start looks away from the cloud, or the camera does not fit the images):
@@ -120,6 +130,8 @@ class RefineConfig:
     structure_weight: float = 0.0
     parallel: bool = True
     max_pairs: int | None = None
+    points_per_pixel: float | None = None
+    min_sampled_points: int = 50_000
     min_visible_points: int = 100
 
     def __post_init__(self):
@@ -151,6 +163,10 @@ class RefineConfig:
             raise ValueError(f"max_pairs must be >= 1, got {self.max_pairs}")
         if self.min_visible_points < 1:
             raise ValueError(f"min_visible_points must be >= 1, got {self.min_visible_points}")
+        if self.min_sampled_points < 1:
+            raise ValueError(f"min_sampled_points must be >= 1, got {self.min_sampled_points}")
+        if self.points_per_pixel is not None and not self.points_per_pixel > 0:
+            raise ValueError(f"points_per_pixel must be > 0 or None, got {self.points_per_pixel}")
         if self.bins < 2:
             raise ValueError(f"bins must be >= 2, got {self.bins}")
         if self.min_pyramid_size < 16:

@@ -357,8 +357,10 @@ def edge_overlay(camera: CameraModel, image, points_lidar, edge_points, poses) -
         _TITLE_PX + panel_h + 2 * _MARGIN_PX,
     )
     fig = _fixed_figure(*fig_size)
+    is_edge = np.zeros(len(points_lidar), dtype=bool)
+    is_edge[edge_points] = True
     for k, (title, T, keep) in enumerate(poses):
-        on_edge = np.intersect1d(keep, edge_points, assume_unique=False)
+        on_edge = np.sort(keep[is_edge[keep]])  # np.intersect1d's answer, without its sorts
         uv, depth, _ = _project_visible(camera, T, points_lidar, on_edge)
         pick = _subsample(len(uv), rng)
         picture = rasterise_points(background, _to_panel(uv[pick], scale), orange, depth[pick], dot)

@@ -470,7 +470,9 @@ def _pixels_covered(pair: RegistrationPair, T: np.ndarray, config: RefineConfig)
     points = np.asarray(pair.points_lidar, dtype=np.float64)[keep]
     uv, valid = pair.camera.project(points @ T[:3, :3].T + T[:3, 3], in_image=True)
     pix = np.floor(uv[valid] + 0.5).astype(np.int64)
-    return int(np.unique(pix[:, 1] * pair.camera.width + pix[:, 0]).size)
+    hit = np.zeros(pair.camera.width * pair.camera.height, dtype=bool)  # O(N), not a sort
+    hit[pix[:, 1] * pair.camera.width + pix[:, 0]] = True
+    return int(np.count_nonzero(hit))
 
 
 def _hessian(cost, T: np.ndarray, steps: np.ndarray) -> np.ndarray:
