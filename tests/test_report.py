@@ -566,3 +566,19 @@ def test_edge_overlay_draws_the_edge_points_in_orange():
         for i, (c, r) in enumerate(centres):
             assert orange[r, c] == (i < n_drawn)
         assert np.all(panel[~orange] == 0)
+
+
+def test_the_parallel_kernels_give_the_report_of_the_serial_ones(
+    pair, quality_at_truth, monkeypatch
+):
+    """Terms of PARALLEL_MIN_POINTS points or more use the parallel kernels: the same report."""
+    import nbcalib.report.quality as quality
+
+    monkeypatch.setattr(quality, "PARALLEL_MIN_POINTS", 1)  # every term parallel
+    q = assess([pair], np.eye(4))
+    serial = quality_at_truth  # these pairs are far below the threshold: serial
+    assert q.verdict == serial.verdict and q.reasons == serial.reasons
+    np.testing.assert_allclose(q.curve_values, serial.curve_values, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(q.hessian, serial.hessian, rtol=1e-8, atol=1e-9)
+    for key in ("translation_total_cm", "rotation_total_deg"):
+        assert q.uncertainty[key] == pytest.approx(serial.uncertainty[key], rel=1e-8)

@@ -288,6 +288,10 @@ def _finite(value, cap: float = 1e6):
     return value
 
 
+#: Points of one NID term from which the report uses the parallel kernels.
+PARALLEL_MIN_POINTS = 100_000
+
+
 def assess(
     pairs: Sequence[RegistrationPair],
     T_camera_lidar,
@@ -331,10 +335,12 @@ def assess(
     if not pairs:
         raise ValueError("assess needs at least one LiDAR-camera pair")
     acfg = assess_config or AssessConfig()
-    # the smooth form has a gradient; serial kernels because assess makes ~150 evaluations of a
-    # few thousand points each, where threads cost more CPU than they save (bench_report_coverage
-    # on a loaded 2-core machine: 0.4 s CPU per case serial, 0.8-6.3 s with the parallel kernels)
-    rcfg = replace(config or RefineConfig(), optimizer="lbfgs", parallel=False)
+    # the smooth form has a gradient. assess makes ~150 evaluations per pair: serial kernels
+    # for a few thousand points, where threads cost more CPU than they save
+    # (bench_report_coverage on a loaded 2-core machine: 0.4 s CPU per case serial, 0.8-6.3 s
+    # with the parallel kernels); the parallel ones from PARALLEL_MIN_POINTS on (a dense cloud
+    # puts a million and more in view)
+    rcfg = replace(config or RefineConfig(), optimizer="lbfgs")
     if start_uncertainty is not None:
         from nbcalib.products import check_uncertainty
 
@@ -353,6 +359,8 @@ def assess(
         hessians, raw_hessians, remeasured = [], [], []
         for pair in pairs:
             cost, counts = build_cost([pair], T, rcfg)
+            for term in cost.costs:
+                term.parallel = rcfg.parallel and term.xyz.shape[1] >= PARALLEL_MIN_POINTS
             value, grad = cost.value_and_grad(T)
             visible.append(counts[0])
             pixels.append(_pixels_covered(pair, T, rcfg))
