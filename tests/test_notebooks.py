@@ -53,7 +53,7 @@ def save_figures(stem: str, figures) -> None:
     """Write a notebook's figures as PNGs into ``$NBCALIB_NOTEBOOK_FIGURES``, when it is set.
 
     To look at what a notebook shows, as a learner would:
-    ``NBCALIB_NOTEBOOK_FIGURES=/tmp/figures pytest tests/test_notebooks.py -k 06_``.
+    ``NBCALIB_NOTEBOOK_FIGURES=figures pytest tests/test_notebooks.py -k 06_``.
     """
     folder = os.environ.get("NBCALIB_NOTEBOOK_FIGURES")
     if not folder:

@@ -52,6 +52,7 @@ def describe_bag(path) -> str:
 
     with open_bag(path) as bag:
         topics, counts = bag.topics, bag.message_counts
+        candidates = {kind: bag.candidates(kind) for kind, _ in KIND_OPTIONS}
     width = max((len(t) for t in topics), default=5)
     lines = [f"{path}: {len(topics)} topics"]
     lines += [
@@ -60,11 +61,11 @@ def describe_bag(path) -> str:
     ]
     lines.append("nbcalib preprocess reads (when no topic option names one):")
     for kind, option in KIND_OPTIONS:
-        candidates = [t for t, msgtype in topics.items() if msgtype in MESSAGE_KINDS[kind]]
-        if len(candidates) == 1:
-            chosen = candidates[0]
-        elif candidates:
-            chosen = f"one of {', '.join(candidates)}: name it with {option}"
+        found = candidates[kind]  # Bag.select_topic's rule: the only one, else name one
+        if len(found) == 1:
+            chosen = found[0]
+        elif found:
+            chosen = f"one of {', '.join(found)}: name it with {option}"
         else:
             chosen = f"nothing: no {kind} topic ({', '.join(MESSAGE_KINDS[kind])})"
         lines.append(f"  {kind + ':':<13} {chosen}")

@@ -118,6 +118,10 @@ class Bag:
     def __repr__(self) -> str:
         return f"Bag({str(self.path)!r}, topics={self.topics})"
 
+    def candidates(self, kind: str) -> list[str]:
+        """The bag's topics of ``kind`` (a key of :data:`MESSAGE_KINDS`), by name."""
+        return [t for t, msgtype in self.topics.items() if msgtype in MESSAGE_KINDS[kind]]
+
     def select_topic(self, kind: str, topic: str | None = None) -> str:
         """The topic to read for ``kind`` (a key of :data:`MESSAGE_KINDS`).
 
@@ -136,7 +140,7 @@ class Bag:
             given topic that does not exist or has another type.
         """
         types = MESSAGE_KINDS[kind]
-        candidates = [t for t, msgtype in self.topics.items() if msgtype in types]
+        candidates = self.candidates(kind)
         if topic is not None:
             if topic not in self.topics:
                 listed = ", ".join(candidates) or "none"

@@ -347,18 +347,19 @@ def build_cost(
                 config.points_per_pixel * camera.width * camera.height, config.min_sampled_points
             )
         )
-        seen = []  # the number of visible points, before the subset
+        n_visible = 0  # before the subset
 
-        def subset(visible, pair=pair, budget=budget, seen=seen):
-            seen.append(visible.size)
-            return pair.sample(visible, budget)
+        def subset(visible):
+            nonlocal n_visible
+            n_visible = visible.size
+            return pair.sample(visible, budget)  # noqa: B023 (called right here, in this pass)
 
         # the subset is drawn before the visible points are sorted by pixel: a sort of far
         # fewer points, and the same result as sampling the sorted ones
         keep = visible_subset(pair, T_camera_lidar, config, select=subset)
-        counts.append(int(seen[0]))
+        counts.append(int(n_visible))
         groups = (
-            _class_groups(pair, keep, config, scale=seen[0] / max(keep.size, 1))
+            _class_groups(pair, keep, config, scale=n_visible / max(keep.size, 1))
             if config.orientation_classes
             else [keep]
         )
