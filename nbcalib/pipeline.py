@@ -77,6 +77,7 @@ class Calibrator:
         self.camera = None
         self.virtual = None
         self.pairs = None
+        self._registration: tuple | None = None  # (key, RegistrationPairs)
         self.matches: dict = {}
         self.guess = None
         self.start: Start | None = None
@@ -565,15 +566,30 @@ class Calibrator:
         return self.pairs
 
     def _registration_pairs(self) -> list:
+        """The pairs fine registration and the report work on, made once per loaded data.
+
+        Calibrate and report of one job share them, so the report reuses the KD-trees,
+        orientation classes and point subsets fine registration computed (``nbcalib run``).
+        """
         from nbcalib.registration.refine import RegistrationPair
 
         pairs = self._pairs()
         if self.config.refine.max_pairs is not None:
             pairs = pairs[: self.config.refine.max_pairs]
         camera = self._camera()
-        return [
-            RegistrationPair(camera, p.image, p.points_lidar, p.intensities, p.name) for p in pairs
-        ]
+        key = (camera, *pairs)  # the objects themselves: an id may be reused once freed
+        cached = self._registration
+        if (
+            cached is None
+            or len(cached[0]) != len(key)
+            or any(a is not b for a, b in zip(cached[0], key))
+        ):
+            made = [
+                RegistrationPair(camera, p.image, p.points_lidar, p.intensities, p.name)
+                for p in pairs
+            ]
+            self._registration = (key, made)
+        return self._registration[1]
 
     def _guess_correspondences(self):
         """(pooled correspondences, calib.json stage, path for messages) for the initial guess."""

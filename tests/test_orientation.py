@@ -40,6 +40,37 @@ def test_normals_and_classes_of_planes(rng):
     assert np.mean(classes == truth) > 0.99
 
 
+def test_covariance_kernel_matches_reference(rng):
+    from nbcalib.kernels.normals import neighbourhood_covariances
+    from nbcalib.reference.normals import neighbourhood_covariances as reference
+
+    points = rng.normal(size=(500, 3)) * [3.0, 1.0, 0.01] + [10.0, -4.0, 2.0]
+    for k in (1, 3, 16):
+        neighbours = rng.integers(0, len(points), (200, k)).astype(np.int32)
+        assert_allclose(
+            neighbourhood_covariances(points, neighbours),
+            reference(points, neighbours),
+            rtol=1e-12,
+            atol=1e-12,
+        )
+    with pytest.raises(ValueError, match="index"):
+        neighbourhood_covariances(points, np.array([[0, 500]]))
+    with pytest.raises(ValueError, match="integer"):
+        neighbourhood_covariances(points, np.zeros((3, 2)))
+
+
+def test_normals_equal_the_plain_numpy_ones(rng):
+    """The kernel and the fast KD-tree give the normals of the gather-einsum-eigh original."""
+    from scipy.spatial import cKDTree
+
+    points, _ = room_corner(rng)
+    _, idx = cKDTree(points).query(points, k=16)
+    centred = points[idx] - points[idx].mean(axis=1, keepdims=True)
+    plain = np.linalg.eigh(np.einsum("nki,nkj->nij", centred, centred))[1][:, :, 0]
+    normals = point_normals(points)
+    assert np.abs(np.sum(plain * normals, axis=1)).min() > 1 - 1e-9
+
+
 def test_normals_bad_input():
     with pytest.raises(ValueError, match="shape"):
         point_normals(np.zeros((10, 2)))

@@ -148,11 +148,11 @@ class RegistrationPair:
         missing = idx[self.classes[idx] < 0]
         if missing.size:
             if self._tree is None:
-                from scipy.spatial import cKDTree
+                from nbcalib.registration.orientation import kdtree
 
                 # non-finite points are dropped by the cost; they get class 0 and no neighbours
                 self._finite = np.flatnonzero(np.isfinite(pts).all(axis=1))
-                self._tree = cKDTree(pts[self._finite]) if self._finite.size >= 3 else False
+                self._tree = kdtree(pts[self._finite]) if self._finite.size >= 3 else False
             ok = np.isin(missing, self._finite) if self._tree is not False else missing < -1
             self.classes[missing[~ok]] = 0
             if ok.any():
