@@ -15,6 +15,7 @@ the seconds of matching + initial guess (calib.json), and the run's exit code an
 line when it stopped.
 
 Run:  python benchmarks/bench_synthetic_cli.py [--seeds 0,1] [--lidars ...] [--cameras ...]
+      [--run-args "--until initial-guess"]   (the guess only: no final error)
 The last line printed is one JSON object with every figure.
 """
 
@@ -23,6 +24,7 @@ from __future__ import annotations
 import argparse
 import json
 import platform
+import shlex
 import shutil
 import subprocess
 import sys
@@ -55,7 +57,7 @@ def evaluate(work: Path, truth: Path, stage: str | None = None) -> dict | None:
     return json.loads(run.stdout.strip().splitlines()[-1])
 
 
-def one_run(lidar: str, camera: str, seed: int, root: Path) -> dict:
+def one_run(lidar: str, camera: str, seed: int, root: Path, run_args=()) -> dict:
     out, work = root / "synth", root / "work"
     for path in (out, work):
         if path.exists():
@@ -68,7 +70,7 @@ def one_run(lidar: str, camera: str, seed: int, root: Path) -> dict:
         [*scans, out / "pair_000.png"] if scans else [out / "pair_000.pcd", out / "pair_000.png"]
     )
     t0 = time.perf_counter()
-    run = nbcalib("run", *inputs, work, "--camera", out / "camera.yaml")
+    run = nbcalib("run", *inputs, work, "--camera", out / "camera.yaml", *run_args)
     wall = time.perf_counter() - t0
     truth = out / "ground_truth.json"
     row = {
@@ -116,7 +118,13 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", default="0,1", help="comma-separated seeds")
     ap.add_argument("--lidars", default=",".join(LIDARS))
     ap.add_argument("--cameras", default=",".join(CAMERAS))
+    ap.add_argument(
+        "--run-args",
+        default="",
+        help='options for every run, e.g. "--until initial-guess --config FILE"',
+    )
     args = ap.parse_args(argv)
+    run_args = shlex.split(args.run_args)
     seeds = [int(s) for s in args.seeds.split(",")]
     lidars, cameras = args.lidars.split(","), args.cameras.split(",")
     print(f"{len(lidars) * len(cameras) * len(seeds)} runs on {platform.processor() or 'cpu'}")
@@ -130,7 +138,7 @@ def main(argv=None) -> int:
         for lidar in lidars:
             for camera in cameras:
                 for seed in seeds:
-                    row = one_run(lidar, camera, seed, Path(tmp))
+                    row = one_run(lidar, camera, seed, Path(tmp), run_args)
                     rows.append(row)
                     print(
                         f"| {lidar} x {camera} | {seed} | {_fmt(row['guess_t_m'], 100, 1)} / "

@@ -205,7 +205,7 @@ REFINE = (
     Option("--structure-weight", "refine.structure_weight",
            "weight of the depth-edge / image-edge NID beside the intensity NID (0: off)", "W"),
     Option("--points-per-pixel", "refine.points_per_pixel",
-           "points per pixel of each pyramid level the NID uses, a fixed random subset of the "
+           "points per camera pixel the NID uses at most, a fixed random subset of the "
            "visible points (none: all)", "P"),
     Option("--max-outer", "refine.max_outer",
            "outer iterations at most, per pyramid level and per optimiser of the hybrid", "N"),

@@ -93,12 +93,11 @@ class RefineConfig:
     max_pairs : int or None
         Register only the first ``max_pairs`` pairs of a job (None: all).
     points_per_pixel : float or None
-        Points of each pair the NID uses at a pyramid level: at most this many per pixel of
-        that level's image, but never fewer than ``min_sampled_points``; a seeded random subset
-        of the visible points (the same points for every pose, nested across levels). None
-        uses every visible point. A 16 x 16 joint histogram needs far fewer than the 1-2
-        million points a dense cloud puts in view (issue 19; not the default until its
-        accuracy is measured).
+        Points of each pair the NID uses: at most this many per pixel of the camera image
+        (full resolution, the same budget at every pyramid level), but never fewer than
+        ``min_sampled_points``; a seeded random subset of the visible points (the same points
+        for every pose). None uses every visible point. A 16 x 16 joint histogram needs far
+        fewer than the 1-2 million points a dense cloud puts in view (issue 19).
     min_sampled_points : int
         The floor of ``points_per_pixel``'s budget (50 000): a pair with fewer visible points
         (a single real scan) keeps all of them at every level.

@@ -340,12 +340,13 @@ def build_cost(
     for pair in pairs:
         camera = downscale_camera(pair.camera, level)
         image = downscale_image(pair.image, level)
+        # the same budget at every pyramid level: a coarse level's histogram is no cheaper to
+        # fill well, and fewer points there cost accuracy (docs/BENCHMARKS.md, section 10)
+        full = pair.camera
         budget = (
             None
             if config.points_per_pixel is None
-            else max(
-                config.points_per_pixel * camera.width * camera.height, config.min_sampled_points
-            )
+            else max(config.points_per_pixel * full.width * full.height, config.min_sampled_points)
         )
         n_visible = 0  # before the subset
 
