@@ -322,7 +322,7 @@ def test_points_per_pixel_samples_a_fixed_nested_subset(rng):
     cam = example_camera("plumb_bob", 320, 240)
     image, points, intensities = textured_scene(cam, rng, n=60000, blur=0.8)
     pair = RegistrationPair(cam, image, points, intensities)
-    visible = visible_subset(pair, np.eye(4), RefineConfig())
+    visible = visible_subset(pair, np.eye(4), RefineConfig(points_per_pixel=None))
     assert pair.sample(visible, None) is visible
     assert pair.sample(visible, visible.size) is visible  # room for all: all, as before
     fine, coarse = pair.sample(visible, 20000), pair.sample(visible, 5000)
@@ -341,7 +341,9 @@ def test_points_per_pixel_budget_has_a_floor_and_is_validated(rng):
     image, points, intensities = textured_scene(cam, rng, n=30000, blur=0.8)
     pair = RegistrationPair(cam, image, points, intensities)
     T = se3_exp(np.array([0.01, 0.0, 0.0, 0.0, 0.005, 0.0]))
-    full, counts = build_cost([pair], T, RefineConfig(orientation_classes=False))
+    full, counts = build_cost(
+        [pair], T, RefineConfig(orientation_classes=False, points_per_pixel=None)
+    )
     # 0.01 points per pixel of 320 x 240 would be 768 points; the floor keeps every one of the
     # visible points here, so the cost is the same to the bit
     floored, counts2 = build_cost(

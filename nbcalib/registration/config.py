@@ -96,8 +96,10 @@ class RefineConfig:
         Points of each pair the NID uses: at most this many per pixel of the camera image
         (full resolution, the same budget at every pyramid level), but never fewer than
         ``min_sampled_points``; a seeded random subset of the visible points (the same points
-        for every pose). None uses every visible point. A 16 x 16 joint histogram needs far
-        fewer than the 1-2 million points a dense cloud puts in view (issue 19).
+        for every pose). None uses every visible point. Default 0.25: a 16 x 16 joint
+        histogram needs far fewer than the 1-2 million points a dense cloud puts in view; on
+        the synthetic rigs and the real data the errors are those of every point, in 20-70 %
+        less time (docs/BENCHMARKS.md, section 10).
     min_sampled_points : int
         The floor of ``points_per_pixel``'s budget (50 000): a pair with fewer visible points
         (a single real scan) keeps all of them at every level.
@@ -129,7 +131,7 @@ class RefineConfig:
     structure_weight: float = 0.0
     parallel: bool = True
     max_pairs: int | None = None
-    points_per_pixel: float | None = None
+    points_per_pixel: float | None = 0.25
     min_sampled_points: int = 50_000
     min_visible_points: int = 100
 
