@@ -8,13 +8,14 @@ stage are the ones ``run`` writes to ``calib.json`` (``nbcalib.seconds``); wall 
 command, interpreter start-up included.
 
 warm: the numba cache already holds every kernel (a first run of the same combination fills
-it and is not counted). cold: an empty cache (``NUMBA_CACHE_DIR`` set to a new folder), as on
-a fresh install, the background warm-up of ``nbcalib run`` included.
+it and is not counted; ``--no-warmup`` skips that run when an earlier one has filled it).
+cold: an empty cache (``NUMBA_CACHE_DIR`` set to a new folder), as on a fresh install, the
+background warm-up of ``nbcalib run`` included.
 
 Run one job at a time on an idle machine:
 
     python benchmarks/bench_user_path.py                        # 1 pair, the 5 combinations
-    python benchmarks/bench_user_path.py --pairs 15 --combos livox:pinhole
+    python benchmarks/bench_user_path.py --pairs 15 --combos livox:pinhole --no-warmup
     python benchmarks/bench_user_path.py --cold --combos spinning64:fisheye
 
 The last line printed is one JSON object with every figure.
@@ -25,6 +26,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -61,12 +63,15 @@ def synthesise(out: Path, lidar: str, camera: str, pairs: int, seed: int) -> lis
 
 
 def run_job(bags: list[Path], work: Path, truth: Path, env, extra=()) -> dict:
+    shutil.rmtree(work, ignore_errors=True)  # a failed run must not report the last one's figures
     t0 = time.perf_counter()
     run = nbcalib("run", *bags, work, "--force", *extra, env=env)
     wall = time.perf_counter() - t0
     row = {"exit": run.returncode, "wall_s": round(wall, 1)}
+    row.update(seconds=dict.fromkeys(STAGES), verdict=None)
     if run.returncode != 0:
         row["error"] = (run.stderr.strip().splitlines() or [""])[-1][:300]
+        return row
     calib_path = work / "calib.json"
     info = json.loads(calib_path.read_text()).get("nbcalib", {}) if calib_path.is_file() else {}
     row["seconds"] = {s: info.get("seconds", {}).get(s) for s in STAGES}
@@ -85,6 +90,12 @@ def main(argv=None) -> int:
     ap.add_argument("--combos", default=",".join(DEFAULT_COMBOS), help="lidar:camera,...")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--cold", action="store_true", help="time the run on an empty numba cache")
+    ap.add_argument(
+        "--no-warmup",
+        dest="warmup",
+        action="store_false",
+        help="no first run to fill the numba cache (it is warm from an earlier run)",
+    )
     ap.add_argument(
         "--with",
         dest="variants",
@@ -109,7 +120,7 @@ def main(argv=None) -> int:
             env = dict(os.environ)
             if args.cold:
                 env["NUMBA_CACHE_DIR"] = str(root / "numba_cache")  # empty: every kernel compiles
-            else:
+            elif args.warmup:
                 run_job(bags, root / "warmup_work", truth, env)  # fills the cache, not counted
             for variant in ["", *args.variants]:
                 extra = variant.split()

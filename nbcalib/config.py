@@ -120,6 +120,8 @@ def _kind(annotation: str) -> tuple[str, bool]:
 def _coerce(where: str, annotation: str, value: Any) -> Any:
     """``value`` as the field's type, or a ValueError naming ``where``."""
     base, optional = _kind(annotation)
+    if isinstance(value, str) and value.lower() == "none" and optional and base != "str":
+        value = None  # TOML has no null: "none" empties an optional number
     if value is None:
         if optional:
             return None

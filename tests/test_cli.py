@@ -102,6 +102,30 @@ def test_no_retries_switches_the_matching_retries_off():
     assert off.matching.retry_pixels_per_degree == ()
 
 
+def test_optional_numbers_take_none_on_the_command_line_and_in_files(capsys):
+    import argparse
+
+    from nbcalib.commands._options import REFINE, add_options, build_config
+
+    parser = argparse.ArgumentParser()
+    add_options(parser, REFINE)
+    assert build_config(parser.parse_args([])).refine.points_per_pixel == 0.25
+    every = build_config(parser.parse_args(["--points-per-pixel", "none"]))
+    assert every.refine.points_per_pixel is None
+    assert (
+        build_config(parser.parse_args(["--points-per-pixel", "0.1"])).refine.points_per_pixel
+        == 0.1
+    )
+    from_file = build_config(parser.parse_args([]), file_values={"refine.points_per_pixel": "none"})
+    assert from_file.refine.points_per_pixel is None  # TOML has no null
+    with pytest.raises(SystemExit):
+        parser.parse_args(["--points-per-pixel", "many"])
+    assert "expected a number or none, got 'many'" in capsys.readouterr().err
+    with pytest.raises(SystemExit):  # a plain number takes no "none"
+        parser.parse_args(["--bins", "none"])
+    assert "expected an integer, got 'none'" in capsys.readouterr().err
+
+
 @pytest.mark.parametrize(
     "argv, dest, value",
     [

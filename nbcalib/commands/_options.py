@@ -95,13 +95,23 @@ class Option:
         annotation = str(SECTIONS[section].__dataclass_fields__[name].type)
         return next(p.strip() for p in annotation.split("|") if p.strip() != "None")
 
+    def optional(self) -> bool:
+        """The setting may be None (``--points-per-pixel none``)."""
+        if not self.setting or "." not in self.setting:
+            return False
+        section, _, name = self.setting.partition(".")
+        return "None" in str(SECTIONS[section].__dataclass_fields__[name].type)
 
-def _number(kind: str):
+
+def _number(kind: str, optional: bool = False):
     def parse(text: str):
+        if optional and text.lower() == "none":
+            return None
         try:
             return int(text) if kind == "int" else float(text)
         except ValueError:
             what = "an integer" if kind == "int" else "a number"
+            what += " or none" if optional else ""
             raise argparse.ArgumentTypeError(f"expected {what}, got {text!r}") from None
 
     return parse
@@ -262,7 +272,7 @@ def add_options(group, options) -> None:
         if option.takes_value:
             kind = option.kind()
             if kind in ("int", "float"):
-                kwargs["type"] = _number(kind)
+                kwargs["type"] = _number(kind, option.optional())
             kwargs["metavar"] = option.metavar
             choices = _choices(option)
             if choices is not None:

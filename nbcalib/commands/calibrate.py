@@ -26,6 +26,7 @@ examples:
   nbcalib calibrate work/ --trust-translation 0.1 --trust-rotation 2   # stay within 10 cm / 2 deg
   nbcalib calibrate work/ --init 0.1,-0.05,0.02,0.5,-0.5,0.5,0.5 --init-uncertainty 0.05 1
   nbcalib calibrate work/ --force --bins 8                  # replace a finished result
+  nbcalib calibrate work/ --force --points-per-pixel none   # every visible point, no subset
 
 --init takes T_lidar_camera as x,y,z,qx,qy,qz,qw (metres, quaternion xyzw), the calib.json layout;
 settings not given take their defaults. The run never leaves the trust region around its start
