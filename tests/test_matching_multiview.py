@@ -351,7 +351,7 @@ def test_find_correspondences_retries_finer_inpainted_views_until_a_guess_passes
     seen = []
 
     def fake_match_views(camera, image, pts, values, cfg, **kwargs):
-        seen.append((cfg.pixels_per_degree, cfg.inpaint_deg))
+        seen.append((cfg.pixels_per_degree, cfg.inpaint_deg, cfg.max_keypoints))
         corr = bad if len(seen) == 1 else good
         return multiview.MultiViewMatches([], -1, (), corr, 0.0)
 
@@ -363,11 +363,14 @@ def test_find_correspondences_retries_finer_inpainted_views_until_a_guess_passes
     pair = PairData("p", np.zeros((480, 640), np.uint8), points, np.zeros(200), lidar)
     cfg = MatchConfig(matcher="sift", retry_pixels_per_degree=(10.0, 15.0), retry_inpaint_deg=2.0)
     found = find_module.find_correspondences(camera, pair, cfg)
-    assert seen == [(None, 0.0), (10.0, 2.0)], "stops at the first attempt that passes"
+    # the sweep with the first attempt's keypoints, the retries with retry_max_keypoints
+    assert seen == [(None, 0.0, 1024), (10.0, 2.0, 2048)], "stops at the first attempt that passes"
     assert found.kept_attempt == 1 and found.correspondences is good
     assert [a["guess_ok"] for a in found.attempts] == [False, True]
     seen.clear()
     found = find_module.find_correspondences(
         camera, pair, MatchConfig(matcher="sift", retry_pixels_per_degree=())
     )
-    assert seen == [(None, 0.0)] and found.kept_attempt == 0
+    assert seen == [(None, 0.0, 1024)] and found.kept_attempt == 0
+    with pytest.raises(ValueError, match="retry_max_keypoints"):
+        MatchConfig(retry_max_keypoints=0)

@@ -53,7 +53,10 @@ class MatchConfig:
     detection_threshold : float or None
         Keypoint score threshold of a learned extractor (None: the model's own).
     max_keypoints : int or None
-        Keypoints per image at most (the strongest; None: all the model returns).
+        Keypoints per image at most (the strongest; None: all the model returns). 1024 for
+        the first attempt: LighterGlue's attention costs grow with the square of the
+        keypoints (1.3 s a view at 2048 on the 2-core machine, a quarter of that at 1024), and
+        a synthetic rig's sweep passes its test with either (docs/BENCHMARKS.md, section 10).
     sift_ratio : float
         Lowe's ratio of the SIFT fallback.
     threads : int or None
@@ -89,6 +92,9 @@ class MatchConfig:
         data").
     retry_inpaint_deg : float
         ``inpaint_deg`` of the retries.
+    retry_max_keypoints : int or None
+        ``max_keypoints`` of the retries (2048): the sparse real scans that need a retry lose
+        good guesses with fewer keypoints (2 of 3 refused at 1024 in the real-data benchmark).
     search_radius : float
         A LiDAR keypoint on an empty pixel takes the nearest LiDAR point within this radius,
         pixels (raised to ``fill_radius`` for the views, whose holes are filled).
@@ -118,7 +124,7 @@ class MatchConfig:
     max_image_side: int | None = 2048
     fill_radius: int = 2
     detection_threshold: float | None = None
-    max_keypoints: int | None = 2048
+    max_keypoints: int | None = 1024
     sift_ratio: float = 0.8
     threads: int | None = None
     views: int = 12
@@ -130,6 +136,7 @@ class MatchConfig:
     inpaint_deg: float = 0.0
     retry_pixels_per_degree: tuple[float, ...] = (10.0, 15.0)
     retry_inpaint_deg: float = 2.0
+    retry_max_keypoints: int | None = 2048
     search_radius: float = 2.0
     view_ransac_iterations: int = 2048
     pool: bool = True
@@ -169,8 +176,10 @@ class MatchConfig:
             raise ValueError(f"camera_scale must be in [0.05, 20], got {self.camera_scale}")
         if self.max_image_side is not None and self.max_image_side < 16:
             raise ValueError(f"max_image_side must be >= 16, got {self.max_image_side}")
-        if self.max_keypoints is not None and self.max_keypoints < 1:
-            raise ValueError(f"max_keypoints must be >= 1, got {self.max_keypoints}")
+        for name in ("max_keypoints", "retry_max_keypoints"):
+            value = getattr(self, name)
+            if value is not None and value < 1:
+                raise ValueError(f"{name} must be >= 1, got {value}")
         for name in ("fill_radius", "median", "views"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")

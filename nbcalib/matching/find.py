@@ -203,7 +203,12 @@ def find_correspondences(
     if cfg.views > 0 or T_camera_lidar_prior is not None:
         # the views as configured, then finer inpainted ones until a guess passes its test
         settings = [cfg] + [
-            replace(cfg, pixels_per_degree=ppd, inpaint_deg=cfg.retry_inpaint_deg)
+            replace(
+                cfg,
+                pixels_per_degree=ppd,
+                inpaint_deg=cfg.retry_inpaint_deg,
+                max_keypoints=cfg.retry_max_keypoints,
+            )
             for ppd in cfg.retry_pixels_per_degree
         ]
         best = None
@@ -234,6 +239,7 @@ def find_correspondences(
                     {
                         "pixels_per_degree": attempt.pixels_per_degree,
                         "inpaint_deg": attempt.inpaint_deg,
+                        "max_keypoints": attempt.max_keypoints,
                         "correspondences": len(found.correspondences),
                         "guess_ok": ok,
                         "support": support,
