@@ -175,9 +175,13 @@ def test_match_views_finds_the_heading_and_the_pose_with_sift(rng, yaw_deg):
         camera_normalization="none",
         lidar_normalization="none",
         name="p",
+        max_keypoints=1500,
+        fine_max_keypoints=3000,
     )
     # 8 headings, then one view from the pose they give (refine_view=True)
     assert len(mv.views) == 9 and 0 <= mv.best < 8 and mv.pooled[-1] == 8
+    # the sweep at max_keypoints, the refined view at fine_max_keypoints
+    assert [v.matches.info["max_keypoints"] for v in mv.views] == [1500] * 8 + [3000]
     best = mv.views[mv.best].view.heading_deg
     assert abs((best - yaw_deg + 180.0) % 360.0 - 180.0) <= 22.5 + 1e-9
     refined = mv.views[8].view.heading_deg
@@ -361,16 +365,21 @@ def test_find_correspondences_retries_finer_inpainted_views_until_a_guess_passes
     index = np.full((10, 20), -1, np.int32)
     lidar = LidarImage(np.zeros((10, 20), np.uint8), index, None)
     pair = PairData("p", np.zeros((480, 640), np.uint8), points, np.zeros(200), lidar)
-    cfg = MatchConfig(matcher="sift", retry_pixels_per_degree=(10.0, 15.0), retry_inpaint_deg=2.0)
+    cfg = MatchConfig(
+        matcher="sift",
+        retry_pixels_per_degree=(10.0, 15.0),
+        retry_inpaint_deg=2.0,
+        max_keypoints=1024,
+    )
     found = find_module.find_correspondences(camera, pair, cfg)
-    # the sweep with the first attempt's keypoints, the retries with retry_max_keypoints
+    # the sweep with max_keypoints, the retries with fine_max_keypoints
     assert seen == [(None, 0.0, 1024), (10.0, 2.0, 2048)], "stops at the first attempt that passes"
     assert found.kept_attempt == 1 and found.correspondences is good
     assert [a["guess_ok"] for a in found.attempts] == [False, True]
     seen.clear()
     found = find_module.find_correspondences(
-        camera, pair, MatchConfig(matcher="sift", retry_pixels_per_degree=())
+        camera, pair, MatchConfig(matcher="sift", retry_pixels_per_degree=(), max_keypoints=1024)
     )
     assert seen == [(None, 0.0, 1024)] and found.kept_attempt == 0
-    with pytest.raises(ValueError, match="retry_max_keypoints"):
-        MatchConfig(retry_max_keypoints=0)
+    with pytest.raises(ValueError, match="fine_max_keypoints"):
+        MatchConfig(fine_max_keypoints=0)

@@ -53,10 +53,11 @@ class MatchConfig:
     detection_threshold : float or None
         Keypoint score threshold of a learned extractor (None: the model's own).
     max_keypoints : int or None
-        Keypoints per image at most (the strongest; None: all the model returns). 1024 for
-        the first attempt: LighterGlue's attention costs grow with the square of the
-        keypoints (1.3 s a view at 2048 on the 2-core machine, a quarter of that at 1024), and
-        a synthetic rig's sweep passes its test with either (docs/BENCHMARKS.md, section 10).
+        Keypoints per image at most (the strongest; None: all the model returns), in the
+        heading sweep. LighterGlue's attention grows with the square of the keypoints (1.3 s a
+        view at 2048 on the 2-core machine, 0.5 s at 1024: find-matches 20.6 -> 7.0 s), but
+        1024 left one synthetic guess of 39 at 1.08 deg, flagged ok, so the default stays 2048
+        (docs/BENCHMARKS.md, section 10).
     sift_ratio : float
         Lowe's ratio of the SIFT fallback.
     threads : int or None
@@ -92,9 +93,11 @@ class MatchConfig:
         data").
     retry_inpaint_deg : float
         ``inpaint_deg`` of the retries.
-    retry_max_keypoints : int or None
-        ``max_keypoints`` of the retries (2048): the sparse real scans that need a retry lose
-        good guesses with fewer keypoints (2 of 3 refused at 1024 in the real-data benchmark).
+    fine_max_keypoints : int or None
+        ``max_keypoints`` of the finer matching (2048): the refined view (``refine_view``) and
+        the retries, so that a faster sweep (``max_keypoints`` 1024) keeps them: the sparse
+        real scans that need a retry lose good guesses with fewer keypoints (2 of 3 refused
+        with 1024 everywhere in the real-data benchmark, none with the retries at 2048).
     search_radius : float
         A LiDAR keypoint on an empty pixel takes the nearest LiDAR point within this radius,
         pixels (raised to ``fill_radius`` for the views, whose holes are filled).
@@ -124,7 +127,7 @@ class MatchConfig:
     max_image_side: int | None = 2048
     fill_radius: int = 2
     detection_threshold: float | None = None
-    max_keypoints: int | None = 1024
+    max_keypoints: int | None = 2048
     sift_ratio: float = 0.8
     threads: int | None = None
     views: int = 12
@@ -136,7 +139,7 @@ class MatchConfig:
     inpaint_deg: float = 0.0
     retry_pixels_per_degree: tuple[float, ...] = (10.0, 15.0)
     retry_inpaint_deg: float = 2.0
-    retry_max_keypoints: int | None = 2048
+    fine_max_keypoints: int | None = 2048
     search_radius: float = 2.0
     view_ransac_iterations: int = 2048
     pool: bool = True
@@ -176,7 +179,7 @@ class MatchConfig:
             raise ValueError(f"camera_scale must be in [0.05, 20], got {self.camera_scale}")
         if self.max_image_side is not None and self.max_image_side < 16:
             raise ValueError(f"max_image_side must be >= 16, got {self.max_image_side}")
-        for name in ("max_keypoints", "retry_max_keypoints"):
+        for name in ("max_keypoints", "fine_max_keypoints"):
             value = getattr(self, name)
             if value is not None and value < 1:
                 raise ValueError(f"{name} must be >= 1, got {value}")

@@ -207,7 +207,7 @@ def find_correspondences(
                 cfg,
                 pixels_per_degree=ppd,
                 inpaint_deg=cfg.retry_inpaint_deg,
-                max_keypoints=cfg.retry_max_keypoints,
+                max_keypoints=cfg.fine_max_keypoints,
             )
             for ppd in cfg.retry_pixels_per_degree
         ]

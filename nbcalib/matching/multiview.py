@@ -147,8 +147,8 @@ def _view_matches(
 def _refined_view(camera, corr, guess_config, seed, render, match) -> ViewMatches | None:
     """One more view rendered from the pose the kept correspondences give (None if none).
 
-    ``render(R_vcam_lidar, t_vcam_lidar)`` and ``match(view)`` are :func:`match_views`'s own
-    rendering and matching, with its settings.
+    ``render(R_vcam_lidar, t_vcam_lidar)`` and ``match(view, fine)`` are :func:`match_views`'s
+    own rendering and matching, with its settings (``fine``: at ``fine_max_keypoints``).
     """
     from nbcalib.errors import InputError
     from nbcalib.initial_guess.estimate import estimate_initial_guess
@@ -162,7 +162,7 @@ def _refined_view(camera, corr, guess_config, seed, render, match) -> ViewMatche
     if not guess.success:
         return None
     T = guess.T_camera_lidar
-    return match(render(T[:3, :3], T[:3, 3]))
+    return match(render(T[:3, :3], T[:3, 3]), fine=True)
 
 
 def match_views(
@@ -280,13 +280,15 @@ def match_views(
             inpaint=inpaint,
         )
 
-    def match(view):
+    fine_cfg = replace(cfg, max_keypoints=cfg.fine_max_keypoints)
+
+    def match(view, fine=False):
         return _view_matches(
             camera,
             image,
             view,
             points,
-            cfg,
+            fine_cfg if fine else cfg,
             model_dir,
             search_radius,
             name,
