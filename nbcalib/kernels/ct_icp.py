@@ -42,6 +42,7 @@ from numba import prange
 
 from nbcalib.kernels._jit import jit, jit_parallel
 from nbcalib.kernels.lie import _so3_exp_scalars_into
+from nbcalib.kernels.normals import _scatter3
 from nbcalib.kernels.voxelmap import _knn_one
 
 #: number of chunks the point loops are split into (fixed: it sets the summation order)
@@ -142,27 +143,7 @@ def _plane(store_flat, idx, n):
     Mean, unit normal, CT-ICP planarity ``a2D`` (0 when degenerate) and the smallest eigenvalue
     ``l0`` of the covariance (the squared thickness of the patch).
     """
-    mx = my = mz = 0.0
-    for j in range(n):
-        f = idx[j]
-        mx += store_flat[f, 0]
-        my += store_flat[f, 1]
-        mz += store_flat[f, 2]
-    mx /= n
-    my /= n
-    mz /= n
-    c00 = c01 = c02 = c11 = c12 = c22 = 0.0
-    for j in range(n):
-        f = idx[j]
-        dx = store_flat[f, 0] - mx
-        dy = store_flat[f, 1] - my
-        dz = store_flat[f, 2] - mz
-        c00 += dx * dx
-        c01 += dx * dy
-        c02 += dx * dz
-        c11 += dy * dy
-        c12 += dy * dz
-        c22 += dz * dz
+    mx, my, mz, c00, c01, c02, c11, c12, c22 = _scatter3(store_flat, idx, n)
     l0, l1, l2, nx, ny, nz = _sym3_smallest(c00 / n, c01 / n, c02 / n, c11 / n, c12 / n, c22 / n)
     l0 = max(l0, 0.0)
     if l2 <= 0.0 or nx * nx + ny * ny + nz * nz == 0.0:

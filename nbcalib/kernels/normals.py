@@ -19,33 +19,42 @@ __all__ = ["neighbourhood_covariances"]
 
 
 @jit
+def _scatter3(points, idx, n):
+    """Mean and scatter matrix of the ``n`` points ``points[idx[:n]]``.
+
+    Returns (mx, my, mz, sxx, sxy, sxz, syy, syz, szz): the scatter is the sum of
+    (p - mean)(p - mean)^T, not divided by ``n``. Shared by the normals and CT-ICP's planes.
+    """
+    mx = my = mz = 0.0
+    for j in range(n):
+        r = idx[j]
+        mx += points[r, 0]
+        my += points[r, 1]
+        mz += points[r, 2]
+    mx /= n
+    my /= n
+    mz /= n
+    sxx = sxy = sxz = syy = syz = szz = 0.0
+    for j in range(n):
+        r = idx[j]
+        dx = points[r, 0] - mx
+        dy = points[r, 1] - my
+        dz = points[r, 2] - mz
+        sxx += dx * dx
+        sxy += dx * dy
+        sxz += dx * dz
+        syy += dy * dy
+        syz += dy * dz
+        szz += dz * dz
+    return mx, my, mz, sxx, sxy, sxz, syy, syz, szz
+
+
+@jit
 def _neighbourhood_covariances_impl(points, neighbours, out):
     """out[i] = sum over j of (p_j - mean)(p_j - mean)^T, j in neighbours[i] (not divided by k)."""
     n, k = neighbours.shape
     for i in range(n):
-        mx = 0.0
-        my = 0.0
-        mz = 0.0
-        for j in range(k):
-            r = neighbours[i, j]
-            mx += points[r, 0]
-            my += points[r, 1]
-            mz += points[r, 2]
-        mx /= k
-        my /= k
-        mz /= k
-        sxx = sxy = sxz = syy = syz = szz = 0.0
-        for j in range(k):
-            r = neighbours[i, j]
-            dx = points[r, 0] - mx
-            dy = points[r, 1] - my
-            dz = points[r, 2] - mz
-            sxx += dx * dx
-            sxy += dx * dy
-            sxz += dx * dz
-            syy += dy * dy
-            syz += dy * dz
-            szz += dz * dz
+        _, _, _, sxx, sxy, sxz, syy, syz, szz = _scatter3(points, neighbours[i], k)
         out[i, 0, 0] = sxx
         out[i, 0, 1] = sxy
         out[i, 0, 2] = sxz
