@@ -17,7 +17,7 @@ import logging
 from dataclasses import dataclass, fields
 from typing import Any
 
-from nbcalib.config import SECTIONS, CalibrationConfig, renamed_settings, set_values
+from nbcalib.config import SECTIONS, CalibrationConfig, _kind, renamed_settings, set_values
 from nbcalib.errors import InputError
 
 log = logging.getLogger("nbcalib")
@@ -85,22 +85,22 @@ class Option:
             return getattr(CalibrationConfig(), section)
         return getattr(SECTIONS[section](), name)
 
-    def kind(self) -> str:
-        """The setting's base type: ``int``, ``float``, ``str`` or ``bool``."""
+    def _type(self) -> tuple[str, bool]:
+        """(base type, None allowed) of the setting, as :mod:`nbcalib.config` reads it."""
         if not self.setting:
-            return "str"
+            return "str", False
         section, _, name = self.setting.partition(".")
         if not name:
-            return "int"
-        annotation = str(SECTIONS[section].__dataclass_fields__[name].type)
-        return next(p.strip() for p in annotation.split("|") if p.strip() != "None")
+            return "int", False
+        return _kind(str(SECTIONS[section].__dataclass_fields__[name].type))
+
+    def kind(self) -> str:
+        """The setting's base type: ``int``, ``float``, ``str`` or ``bool``."""
+        return self._type()[0]
 
     def optional(self) -> bool:
         """The setting may be None (``--points-per-pixel none``)."""
-        if not self.setting or "." not in self.setting:
-            return False
-        section, _, name = self.setting.partition(".")
-        return "None" in str(SECTIONS[section].__dataclass_fields__[name].type)
+        return self._type()[1]
 
 
 def _number(kind: str, optional: bool = False):
