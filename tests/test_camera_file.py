@@ -113,6 +113,19 @@ def test_opencv_fisheye_and_plain_yaml_with_K_D(tmp_path):
     np.testing.assert_array_equal(cam.intrinsics, [280.0, 281.0, 400.5, 300.5])
 
 
+def test_plain_json_model_key_selects_fisheye(tmp_path):
+    """The shared real data's calib_normalized.json names the model under ``model``."""
+    path = tmp_path / "calib_normalized.json"
+    K = [[959.554, 0, 940.789], [0, 960.194, 670.737], [0, 0, 1]]
+    doc = {"K": K, "dist": [-0.0978, 0.1414, -0.1484, 0.0559], "width": 1920, "height": 1208}
+    path.write_text(json.dumps({**doc, "model": "fisheye"}))
+    cam = load_camera(path)
+    assert (cam.model, cam.width, cam.height) == ("fisheye", 1920, 1208)
+    np.testing.assert_array_equal(cam.distortion_coeffs, [-0.0978, 0.1414, -0.1484, 0.0559])
+    path.write_text(json.dumps({**doc, "model": "plumb_bob"}))
+    assert load_camera(path).model == "plumb_bob"
+
+
 def test_nbcalib_yaml_fixture():
     cam = load_camera(DATA / "camera_nbcalib.yaml")
     assert cam == create_camera(

@@ -11,7 +11,8 @@
 - an **OpenCV FileStorage** file (``%YAML:1.0`` or XML; ``camera_matrix``/``K``,
   ``distortion_coefficients``/``D``, ``image_width``/``image_height``; an optional
   ``distortion_model: fisheye`` selects OpenCV's fisheye model), or a plain YAML/JSON with the
-  same keys;
+  same keys (``K``, ``dist``, ``width``, ``height``, and ``model: fisheye`` for OpenCV's fisheye
+  model, as the shared real data's ``calib_normalized.json``);
 - a **calib.json** (the camera of a work directory; see :mod:`nbcalib.io.calib_json`).
 
 Parameter layouts are those of docs/conventions.md section 7. Every problem with a file is an
@@ -247,7 +248,7 @@ def _opencv_camera(data: dict, path: Path, width, height) -> CameraModel:
 
     K = np.reshape(_matrix_entry(data, _K_KEYS, 9, "camera_matrix", path), (3, 3))
     D = _optional_entry(data, _D_KEYS, "distortion_coefficients", path)
-    name = data.get("distortion_model", data.get("camera_model", ""))
+    name = next((data[k] for k in ("distortion_model", "camera_model", "model") if k in data), "")
     fisheye = _is_fisheye_name(name)
     size = _file_size(data, path, _WIDTH_KEYS, _HEIGHT_KEYS)
     if size is None and "image_size" in data:
