@@ -3,12 +3,15 @@
 from __future__ import annotations
 
 import os
+from dataclasses import replace
 
 import numpy as np
 import pytest
 from numpy.testing import assert_allclose, assert_array_equal
 
 from nbcalib.camera import CAMERA_MODELS, example_camera
+from nbcalib.kernels.raycast import PRIM_MATERIAL, PRIM_SIZE
+from nbcalib.kernels.synthetic_texture import LUMA
 from nbcalib.synthetic import (
     LIDAR_PRESETS,
     Material,
@@ -25,7 +28,10 @@ from nbcalib.synthetic import (
     render_image,
     simulate_scan,
 )
+from nbcalib.synthetic.effects import EFFECTS, lidar_without, render_without
 from nbcalib.synthetic.render import radiance
+from nbcalib.synthetic.scene import Lighting
+from nbcalib.synthetic.texture import surface_properties
 from nbcalib.transforms import interpolate_pose, invert_T, make_T, transform_points
 
 SMALL = (160, 120)
@@ -344,3 +350,269 @@ def test_parallel_with_more_threads_than_cores_equals_serial():
     )
     serial = generate_sequence(_small("spinning32", "fisheye", seed=3, duration=0.2))
     assert out.stdout.strip() == _digest(serial)
+
+
+# --- switching single camera/LiDAR differences off (RigConfig.without) -----------------------
+#: the switches that change the camera image, and those that change the LiDAR scans
+CAMERA_EFFECTS = {"shading", "shadows", "camera-texture", "optics"}
+LIDAR_EFFECTS = {"lidar-texture", "materials", "elements", "lidar-noise", "lidar-falloff"}
+
+#: sha256 of the image and the points as written (x, y, z, intensity, t, ring), recorded with the
+#: code before the switches existed (c6007d7): the default output must not change, bit for bit
+GOLDEN = {
+    "room": "5909669f68e33924339036f5c12aa5cb507472fe8abc27bd3b1b285fc66ac694",
+    "street": "c9baa35cee1e4443ccf592d9561f9b4ff34e7aad570fdc1b0adad084f2715a60",
+    "street_gap": "50e0df9b7a15bb6879ab0603794df3022973693e7ccbb1128fbf9f01db7d764f",
+}
+GOLDEN_CONFIGS = {
+    "room": dict(
+        lidar="spinning16",
+        camera="fisheye",
+        duration=0.3,
+        lidar_config=lidar_preset("spinning16", columns=180),
+        seed=5,
+        color=True,
+    ),
+    "street": dict(lidar="livox", scene="street", duration=0.2, seed=3),
+    "street_gap": dict(
+        lidar="spinning32",
+        scene="street",
+        duration=0.2,
+        lidar_config=lidar_preset("spinning32", columns=256),
+        seed=2,
+        modality_gap=0.4,
+        color=True,
+    ),
+}
+
+
+def _written_digest(seq) -> str:
+    import hashlib
+
+    from nbcalib.synthetic.writer import scan_fields
+
+    h = hashlib.sha256(np.ascontiguousarray(seq.image).tobytes())
+    for scan in seq.output_scans():
+        fields = scan_fields(scan, time_offset=scan.stamp)
+        for key in ("x", "y", "z", "intensity", "t", "ring"):
+            h.update(np.ascontiguousarray(fields[key]).tobytes())
+    return h.hexdigest()
+
+
+@pytest.mark.parametrize("name", GOLDEN)
+def test_the_default_is_todays_output_bit_for_bit(name):
+    """Nothing switched off: the same image and points as before the switches existed.
+
+    The digests hash what the writer writes (8-bit pixels, float32 points), recorded on Linux
+    x86-64; re-record them only for a deliberate change of the rig's default output.
+    """
+    config = RigConfig(image_size=(96, 72), **GOLDEN_CONFIGS[name])
+    assert config.without == ()
+    assert _written_digest(generate_sequence(config)) == GOLDEN[name]
+    assert _written_digest(generate_sequence(replace(config, without=""))) == GOLDEN[name]
+
+
+def test_effects_are_checked_and_kept_in_order():
+    assert set(EFFECTS) == CAMERA_EFFECTS | LIDAR_EFFECTS | {"motion"}
+    assert RigConfig(without="optics, shading,optics").without == ("shading", "optics")
+    assert RigConfig(without=["motion", "shadows"]).without == ("shadows", "motion")
+    with pytest.raises(ValueError, match="unknown effect 'shade'; expected some of shading, "):
+        RigConfig(without=("shade",))
+    render = render_without(RenderConfig(), ("shading", "shadows", "optics"))
+    assert not render.shading and not render.shadows
+    assert render.blur_sigma_px == render.read_noise == render.shot_noise == 0.0
+    lidar = lidar_without(LIDAR_PRESETS["livox"], ("lidar-noise", "lidar-falloff"))
+    assert lidar.range_noise == lidar.intensity_noise == lidar.dropout == 0.0
+    assert lidar.beam_divergence == lidar.incidence_exponent == lidar.range_exponent == 0.0
+    assert render_without(RenderConfig(), ("materials",)) == RenderConfig()
+    assert lidar_without(LIDAR_PRESETS["livox"], ("optics",)) is LIDAR_PRESETS["livox"]
+
+
+@pytest.mark.parametrize("effect", EFFECTS)
+def test_each_switch_changes_its_own_sensor_only(effect):
+    """Every random draw stays in place: a switch changes the image or the scans, not both."""
+    config = _small("spinning16", seed=6, duration=0.2)
+    base = generate_sequence(config)
+    seq = generate_sequence(replace(config, without=(effect,)))
+    assert seq.config.without == (effect,)
+    image_changed = not np.array_equal(seq.image, base.image)
+    scans_changed = any(
+        not np.array_equal(a.points, b.points) or not np.array_equal(a.intensities, b.intensities)
+        for a, b in zip(seq.scans, base.scans)
+    )
+    assert image_changed == (effect in CAMERA_EFFECTS)
+    assert scans_changed == (effect in LIDAR_EFFECTS)
+    assert (len(seq.output_scans()) == 1) == (effect == "motion")  # what is written
+
+
+def _texture_probe(without, gap=1.0) -> dict:
+    """Albedo and reflectivity ``(N, 3), (N,)`` at fixed spots: a plain material (``"plain"``),
+    a brick wall (``"bricks"``), and within a single brick of it (``"brick"``)."""
+    plain = Material("plain", 1.0, (0.6, 0.5, 0.3), (0.6, 0.5, 0.3), 0.45, 0.45, 0.3, 0.3, 0.4)
+    bricks = Material("bricks", 0.2, (0.7, 0.3, 0.2), (0.6, 0.6, 0.6), 0.3, 0.7, 0.3, 0.3, 0.4)
+    materials = np.stack([plain.row(), bricks.row()])
+    prims = np.zeros((2, PRIM_SIZE))
+    prims[1, PRIM_MATERIAL] = 1
+    rng = np.random.default_rng(3)  # the same spots every time
+    spots = {
+        "plain": (0, rng.uniform(-3.0, 3.0, (1000, 2))),
+        "bricks": (1, rng.uniform(-3.0, 3.0, (1000, 2))),
+        # bricks 0.4 x 0.2 m, mortar along s = 0, 0.4 and u = 0, 0.2 in the first row
+        "brick": (1, rng.uniform((0.05, 0.03), (0.35, 0.17), (1000, 2))),
+    }
+    out = {}
+    for name, (prim, surface) in spots.items():
+        args = (prims, materials, np.full(1000, prim), np.zeros(1000, dtype=np.int64), surface)
+        albedo, reflectivity, _, _ = surface_properties(*args, gap=gap, without=without)
+        out[name] = albedo, reflectivity
+    return out
+
+
+PLAIN_COLOUR = np.array([0.6, 0.5, 0.3])
+
+
+def test_texture_switches():
+    full = _texture_probe(())
+    for albedo, reflectivity in full.values():  # both sensors see texture everywhere
+        assert albedo[:, 0].std() > 0.002 and reflectivity.std() > 0.002
+    # camera texture off: a plain material's albedo is its colour all over the surface, a brick
+    # wall's is one colour per brick; the LiDAR's as it was
+    off = _texture_probe(("camera-texture",))
+    assert_array_equal(off["plain"][0], np.broadcast_to(PLAIN_COLOUR, (1000, 3)))
+    assert_array_equal(off["brick"][0], np.broadcast_to(off["brick"][0][0], (1000, 3)))
+    for name in full:
+        assert_array_equal(off[name][1], full[name][1])
+    # LiDAR texture off: a plain material's reflectivity is its own value; the camera as it was
+    off = _texture_probe(("lidar-texture",))
+    assert_array_equal(off["plain"][1], 0.45)
+    assert np.all(off["brick"][1] == off["brick"][1][0])
+    for name in full:
+        assert_array_equal(off[name][0], full[name][0])
+    # materials off too: the luminance of the camera's colour instead of the designed value
+    off = _texture_probe(("lidar-texture", "materials"))
+    assert_allclose(off["plain"][1], PLAIN_COLOUR @ LUMA, rtol=1e-15)
+    # everything off: the LiDAR sees the albedo's luminance (no channel clips here) ...
+    everything = ("camera-texture", "lidar-texture", "materials", "elements")
+    off = _texture_probe(everything)
+    for albedo, reflectivity in off.values():
+        assert_allclose(reflectivity, albedo @ LUMA, rtol=1e-14)
+    # ... but for the per-element tone, which reaches the LiDAR at half strength otherwise
+    albedo, reflectivity = _texture_probe(everything[:3])["bricks"]
+    assert np.abs(reflectivity - albedo @ LUMA).max() > 0.01
+
+
+def test_texture_switches_compose_with_the_modality_gap():
+    """At gap 0 the LiDAR already sees the albedo: only the camera texture switch changes it."""
+    albedo, reflectivity = _texture_probe((), gap=0.0)["bricks"]
+    assert_allclose(reflectivity, albedo @ LUMA, rtol=1e-14)
+    for effect in ("lidar-texture", "materials", "elements"):
+        assert_array_equal(_texture_probe((effect,), gap=0.0)["bricks"][1], reflectivity)
+    _, reflectivity = _texture_probe(("camera-texture",), gap=0.0)["plain"]
+    assert_allclose(reflectivity, PLAIN_COLOUR @ LUMA, rtol=1e-15)
+
+
+def _wall_scene():
+    """A grey plaster wall 4 m ahead of the origin, lit by the ambient light only."""
+    b = SceneBuilder()
+    wall = b.material(Material("plain", 1.0, (0.5,) * 3, (0.5,) * 3, 0.5, 0.5, 0.0, 0.0))
+    b.rectangle((4, 0, 0), (0, 1, 0), (0, 0, 1), (20, 20), wall)
+    return b.build(lighting=Lighting(ambient=0.5))
+
+
+def test_optics_off_gives_an_image_without_noise():
+    scene = _wall_scene()
+    camera = example_camera("pinhole", *SMALL)
+    T_world_camera = make_T(np.array([[0, 0, 1.0], [-1, 0, 0], [0, -1, 0]]), np.zeros(3))
+    image = render_image(scene, camera, T_world_camera, RenderConfig(exposure=1.0)).image
+    assert image.std() > 0.5  # read and shot noise on a flat grey
+    config = render_without(RenderConfig(exposure=1.0), ("optics",))
+    image = render_image(scene, camera, T_world_camera, config).image
+    assert np.all(image == image[0, 0]) and 100 < image[0, 0] < 200
+
+
+def test_shading_off_is_the_albedo_times_a_constant():
+    scene = make_scene(kind="street", seed=2)
+    camera = example_camera("pinhole", *SMALL)
+    bearings = camera.unproject(camera.pixel_grid())
+    directions = bearings @ np.array([[0, 0, 1.0], [-1, 0, 0], [0, -1, 0]]).T
+    flat, _, _ = radiance(scene, np.zeros(3), directions, 0.0, shading=False)
+    hits = scene.cast(np.zeros(3), directions)
+    albedo, _, _, _ = scene.surface_properties(hits, footprint=np.zeros(len(directions)))
+    light = scene.lighting.ambient + scene.lighting.sun_irradiance
+    h = hits.hit
+    assert_array_equal(flat[h], albedo[h] * light)
+    shaded, _, _ = radiance(scene, np.zeros(3), directions, 0.0)
+    assert not np.allclose(shaded[h], flat[h])
+    unshadowed, _, _ = radiance(scene, np.zeros(3), directions, 0.0, shadows=False)
+    assert np.all(unshadowed >= shaded) and np.any(unshadowed > shaded)
+
+
+def _plain_box_room():
+    """The box room of :func:`_box_room` in one plain material without texture."""
+    b = SceneBuilder()
+    m = b.material(Material("plain", 1.0, (0.5,) * 3, (0.5,) * 3, 0.5, 0.5, 0.0, 0.0))
+    for center, a, c, size in [
+        ((4, 0, 0), (0, 1, 0), (0, 0, 1), (5, 3)),
+        ((-3, 0, 0), (0, 1, 0), (0, 0, 1), (5, 3)),
+        ((0, 5, 0), (1, 0, 0), (0, 0, 1), (5, 3)),
+        ((0, -4, 0), (1, 0, 0), (0, 0, 1), (5, 3)),
+        ((0, 0, -1.5), (1, 0, 0), (0, 1, 0), (5, 5)),
+        ((0, 0, 2.5), (1, 0, 0), (0, 1, 0), (5, 5)),
+    ]:
+        b.rectangle(center, a, c, size, m)
+    return b.build()
+
+
+def test_lidar_noise_and_falloff_off():
+    scene, planes = _box_room()
+    trajectory = make_trajectory(MotionConfig(kind="static"), 0.2)
+    lidar = lidar_preset("spinning32", columns=512)
+    quiet = lidar_without(lidar, ("lidar-noise",))
+    a = simulate_scan(scene, quiet, trajectory, 0.0, np.random.default_rng(1))
+    b = simulate_scan(scene, quiet, trajectory, 0.0, np.random.default_rng(2))
+    # nothing random is left: other seeds, the same scan; every beam returns, on a wall
+    for field in ("points", "intensities", "rings"):
+        assert_array_equal(getattr(a, field), getattr(b, field))
+    assert len(a) == lidar.points_per_scan
+    assert _plane_distance(a.points, planes).max() < 1e-9
+    noisy = simulate_scan(scene, lidar, trajectory, 0.0, np.random.default_rng(1))
+    assert len(noisy) < len(a) and _plane_distance(noisy.points, planes).max() > 0.01
+    # without falloff the intensity is the reflectivity: one value in a room of one material
+    plain = _plain_box_room()
+    flat = lidar_without(quiet, ("lidar-falloff",))
+    c = simulate_scan(plain, flat, trajectory, 0.0, np.random.default_rng(1))
+    assert len(c) == len(a) and np.all(c.intensities == 255.0 * 0.5)
+    d = simulate_scan(plain, quiet, trajectory, 0.0, np.random.default_rng(1))
+    assert d.intensities.std() > 10  # incidence and range
+    # with the noise: the reflectivity times the intensity noise
+    noisy = lidar_without(lidar, ("lidar-falloff",))
+    e = simulate_scan(plain, noisy, trajectory, 0.0, np.random.default_rng(1))
+    assert_allclose(np.std(e.intensities / 127.5 - 1.0), lidar.intensity_noise, rtol=0.1)
+
+
+@pytest.mark.parametrize("noise", [True, False])
+def test_motion_off_writes_one_cloud_on_the_true_surfaces(noise):
+    """Each point deskewed with the true trajectory lies on the surface its beam hit."""
+    without = ("motion",) if noise else ("motion", "lidar-noise")
+    seq = generate_sequence(_small("spinning16", seed=3, duration=0.3, without=without))
+    assert len(seq.scans) == 3 and seq.motion.kind == "nod"
+    (cloud,) = seq.output_scans()
+    points, intensities = seq.dense_cloud()
+    assert_array_equal(cloud.points, points)
+    assert_array_equal(cloud.intensities, intensities)
+    assert cloud.stamp == 0.0 and np.all(cloud.times == 0.0)
+    assert_array_equal(cloud.rings, np.concatenate([s.rings for s in seq.scans]))
+    # cast each point's beam again from where the rig was when it fired
+    times = np.concatenate([s.stamp + s.times for s in seq.scans])
+    origins = seq.trajectory.poses(times)[:, :3, 3]
+    offsets = cloud.points - origins
+    distance = np.linalg.norm(offsets, axis=1)
+    hits = seq.scene.cast(origins, offsets / distance[:, None])
+    assert_array_equal(hits.prim, cloud.prim)
+    residual = distance - hits.t
+    if noise:
+        assert_allclose(residual.std(), seq.lidar.range_noise, rtol=0.1)
+    else:
+        assert np.abs(residual).max() < 1e-9
+    # the sweeps themselves are as simulated: distorted by the motion
+    assert not np.allclose(seq.scans[-1].points, seq.scans[-1].points_undistorted)

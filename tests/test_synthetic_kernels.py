@@ -2,7 +2,9 @@
 
 Small, nasty inputs: every pattern, negative and lattice-aligned surface coordinates, zero and
 huge footprints, misses and invalid rays, rays from inside a box, retro-reflectors, glass,
-returns pushed out of range by the noise. Parallel variants must equal the serial ones exactly.
+returns pushed out of range by the noise; each texture switch of ``nbcalib synth --without``
+(the ``off`` bits) on its own and all together, and the shading switched off. Parallel variants
+must equal the serial ones exactly.
 """
 
 from __future__ import annotations
@@ -24,6 +26,10 @@ from nbcalib.synthetic.texture import PATTERNS, Material
 from nbcalib.transforms import random_rotation
 
 GAPS = (0.0, 0.37, 1.0)
+#: every texture switch (the kernels' ``off`` bits)
+ALL_OFF = tx.OFF_CAMERA_TEXTURE | tx.OFF_LIDAR_TEXTURE | tx.OFF_MATERIALS | tx.OFF_ELEMENTS
+#: each switch on its own, and all of them
+OFFS = (tx.OFF_CAMERA_TEXTURE, tx.OFF_LIDAR_TEXTURE, tx.OFF_MATERIALS, tx.OFF_ELEMENTS, ALL_OFF)
 
 
 def _materials(rng):
@@ -75,11 +81,13 @@ def _texture_inputs(rng, n=4000):
     return prims, materials, prim, face, surface, footprint
 
 
-def _surface_kernel(prims, materials, prim, face, surface, footprint, gap, *, parallel=False):
+def _surface_kernel(
+    prims, materials, prim, face, surface, footprint, gap, *, off=0, parallel=False
+):
     n = len(prim)
     out = (np.empty((n, 3)), np.empty(n), np.empty(n), np.empty(n, dtype=np.bool_))
     kernel = tx._surface_properties_parallel if parallel else tx._surface_properties
-    kernel(prims, materials, prim, face, surface, footprint, gap, *out)
+    kernel(prims, materials, prim, face, surface, footprint, gap, off, *out)
     return out
 
 
@@ -100,6 +108,44 @@ def test_texture_kernel_matches_reference(gap):
         assert np.nanmax(want[1]) > 1.0
     else:
         assert not want[3].any()
+
+
+@pytest.mark.parametrize("gap", [0.37, 1.0])
+@pytest.mark.parametrize("off", OFFS)
+def test_texture_kernel_matches_reference_with_switches(off, gap):
+    rng = np.random.default_rng(7)
+    args = _texture_inputs(rng, n=2000)
+    got = _surface_kernel(*args, gap, off=off)
+    want = surface_reference(*args, gap, off)
+    hit = args[2] >= 0
+    for g, w in zip(got[:3], want[:3]):
+        assert_array_equal(np.isnan(g), np.isnan(w))
+        assert_allclose(g[hit], w[hit], **TOL["kernel_vs_reference"])
+    assert_array_equal(got[3], want[3])
+    # each switch changes what it should: the camera texture the albedo (and the LiDAR through
+    # the 1 - gap term only), the others the LiDAR alone
+    default = _surface_kernel(*args, gap)
+    camera_changed = not np.array_equal(got[0][hit], default[0][hit])
+    lidar_changed = not np.array_equal(got[1][hit], default[1][hit])
+    assert camera_changed == bool(off & tx.OFF_CAMERA_TEXTURE)
+    assert lidar_changed == (off != tx.OFF_CAMERA_TEXTURE or gap < 1.0)
+    if off & tx.OFF_MATERIALS:
+        assert not got[3].any() and not got[2].any()  # no retro-reflectors, no glass dropouts
+        assert np.nanmax(got[1]) <= 1.0
+    else:
+        assert_array_equal(got[2], default[2])
+
+
+@pytest.mark.parametrize("off", OFFS)
+def test_texture_switches_of_the_lidar_do_nothing_at_gap_zero(off):
+    """At gap 0 the LiDAR sees the camera's albedo: only the camera texture switch acts."""
+    rng = np.random.default_rng(10)
+    args = _texture_inputs(rng, n=2000)
+    got = _surface_kernel(*args, 0.0, off=off)
+    default = _surface_kernel(*args, 0.0)
+    for a, b in zip(got[:2], default[:2]):  # albedo, reflectivity
+        assert np.array_equal(a, b, equal_nan=True) == (not off & tx.OFF_CAMERA_TEXTURE)
+    assert not got[2].any() and not got[3].any()  # no dropouts, no retro-reflectors at gap 0
 
 
 @pytest.mark.parametrize("name", PATTERNS)
@@ -131,9 +177,9 @@ def test_texture_kernel_matches_reference_on_each_pattern(name):
 def test_texture_parallel_equals_serial():
     rng = np.random.default_rng(8)
     args = _texture_inputs(rng, n=6000)
-    for gap in GAPS:
-        serial = _surface_kernel(*args, gap)
-        parallel = _surface_kernel(*args, gap, parallel=True)
+    for gap, off in [(g, 0) for g in GAPS] + [(0.6, ALL_OFF)]:
+        serial = _surface_kernel(*args, gap, off=off)
+        parallel = _surface_kernel(*args, gap, off=off, parallel=True)
         for a, b in zip(serial, parallel):
             assert_array_equal(a, b)
 
@@ -181,19 +227,23 @@ def _lighting(rng):
     return sun, 0.35, lights, np.array([0.35, 0.5, 0.85]), np.array([0.8, 0.85, 0.9])
 
 
-def _shade_kernel(scene, gap, origin, directions, pixel_angle, light, shadows, *, parallel=False):
+def _shade_kernel(
+    scene, gap, origin, directions, pixel_angle, light, shadows, *, off=0, shading=True, **kw
+):
     prims, materials, bounds, nodes, order = scene
     n = len(directions)
     out = (np.empty((n, 3)), np.empty(n), np.empty(n, dtype=np.int64))
-    kernel = sh._shade_parallel if parallel else sh._shade
-    scene_args = (prims, bounds, nodes, order, materials, gap)
-    kernel(*scene_args, origin, directions, pixel_angle, *light, shadows, *out)
+    kernel = sh._shade_parallel if kw.get("parallel") else sh._shade
+    scene_args = (prims, bounds, nodes, order, materials, gap, off)
+    kernel(*scene_args, origin, directions, pixel_angle, *light, shadows, shading, *out)
     return out
 
 
 @pytest.mark.parametrize("enclosed", [False, True])
-@pytest.mark.parametrize("shadows", [True, False])
-def test_shading_kernel_matches_reference(enclosed, shadows):
+@pytest.mark.parametrize(
+    "shadows, off, shading", [(True, 0, True), (False, 0, True), (True, ALL_OFF, False)]
+)
+def test_shading_kernel_matches_reference(enclosed, shadows, off, shading):
     rng = np.random.default_rng(11)
     scene = _scene(rng, enclosed=enclosed)
     origin = np.array([0.2, -0.1, 0.4])
@@ -202,9 +252,10 @@ def test_shading_kernel_matches_reference(enclosed, shadows):
     pixel_angle = rng.choice([0.0, 1e-3, 0.05], 300)
     light = _lighting(rng)
     gap = 0.5
-    got = _shade_kernel(scene, gap, origin, directions, pixel_angle, light, shadows)
+    switches = dict(off=off, shading=shading)
+    got = _shade_kernel(scene, gap, origin, directions, pixel_angle, light, shadows, **switches)
     want = radiance_reference(
-        scene[0], scene[1], gap, origin, directions, pixel_angle, light, shadows
+        scene[0], scene[1], gap, origin, directions, pixel_angle, light, shadows, **switches
     )
     assert_array_equal(got[2], want[2])
     assert_array_equal(np.isnan(got[1]), np.isnan(want[1]))
@@ -223,8 +274,42 @@ def test_shading_parallel_equals_serial():
         directions = _directions(rng, 5000)
         pixel_angle = rng.uniform(0, 0.01, 5000)
         args = (scene, 1.0, np.array([0.2, -0.1, 0.4]), directions, pixel_angle, light, True)
-        for a, b in zip(_shade_kernel(*args), _shade_kernel(*args, parallel=True)):
-            assert_array_equal(a, b)
+        for switches in (dict(), dict(off=ALL_OFF, shading=False)):
+            serial = _shade_kernel(*args, **switches)
+            for a, b in zip(serial, _shade_kernel(*args, **switches, parallel=True)):
+                assert_array_equal(a, b)
+
+
+def test_shading_off_is_the_albedo_times_a_constant():
+    """Without shading every hit gets ``ambient + sun irradiance``: no normal, lamps, shadows."""
+    rng = np.random.default_rng(15)
+    scene = _scene(rng, enclosed=True)
+    directions = _directions(rng, 2000)
+    origin = np.array([0.2, -0.1, 0.4])
+    light = _lighting(rng)
+    sharp = np.zeros(len(directions))  # pixels of no size: the texture unfiltered
+    flat, _, prim = _shade_kernel(scene, 0.5, origin, directions, sharp, light, True, shading=False)
+    _, hit_prim, hit_face, hit_surface = _cast(scene, origin, directions)
+    assert_array_equal(prim, hit_prim)
+    albedo = _surface_kernel(scene[0], scene[1], hit_prim, hit_face, hit_surface, sharp, 0.5)[0]
+    sun, ambient = light[0], light[1]
+    hit = prim >= 0
+    assert hit.mean() > 0.99
+    assert_array_equal(flat[hit], albedo[hit] * (ambient + sun[3]))
+    shaded, _, _ = _shade_kernel(scene, 0.5, origin, directions, sharp, light, True)
+    ratio = shaded[hit].sum(axis=1) / flat[hit].sum(axis=1)
+    assert np.nanstd(ratio) > 0.1  # the shaded image varies with normals, lamps and shadows
+
+
+def _cast(scene, origin, directions):
+    """Nearest hits ``(t, prim, face, surface)`` of rays from one origin (the raycast kernel)."""
+    prims, _, bounds, nodes, order = scene
+    n = len(directions)
+    out = (np.empty(n), np.empty(n, dtype=np.int64), np.empty(n, dtype=np.int64))
+    out += (np.empty((n, 3)), np.empty((n, 2)))
+    origins = np.ascontiguousarray(np.broadcast_to(origin, directions.shape))
+    rc._cast_rays(prims, bounds, nodes, order, origins, directions, 0.0, np.inf, *out)
+    return out[0], out[1], out[2], out[4]
 
 
 def _scan(rng, n):
@@ -253,25 +338,28 @@ def _scan(rng, n):
     return (rotations, positions), beams, params, start_pose
 
 
-def _returns_kernel(scene, gap, scan, *, parallel=False):
+def _returns_kernel(scene, gap, scan, *, off=0, parallel=False):
     prims, materials, bounds, nodes, order = scene
     poses, beams, params, start_pose = scan
     n = len(beams[0])
     out = (np.zeros(n, dtype=np.bool_), np.empty(n), np.empty(n), np.full((n, 3), np.nan))
     out += (np.empty(n, dtype=np.int64),)
     kernel = sl._returns_parallel if parallel else sl._returns
-    kernel(prims, bounds, nodes, order, materials, gap, *poses, *beams, params, *start_pose, *out)
+    scene_args = (prims, bounds, nodes, order, materials, gap, off)
+    kernel(*scene_args, *poses, *beams, params, *start_pose, *out)
     return out
 
 
-@pytest.mark.parametrize("gap", GAPS)
+@pytest.mark.parametrize(
+    "gap, off", [(g, 0) for g in GAPS] + [(1.0, tx.OFF_MATERIALS), (0.37, ALL_OFF)]
+)
 @pytest.mark.parametrize("enclosed", [False, True])
-def test_lidar_kernel_matches_reference(gap, enclosed):
+def test_lidar_kernel_matches_reference(gap, off, enclosed):
     rng = np.random.default_rng(13)
     scene = _scene(rng, enclosed=enclosed)
     scan = _scan(rng, 400)
-    got = _returns_kernel(scene, gap, scan)
-    want = returns_reference(scene[0], scene[1], gap, *scan)
+    got = _returns_kernel(scene, gap, scan, off=off)
+    want = returns_reference(scene[0], scene[1], gap, *scan, off=off)
     assert_array_equal(got[4], want[4])  # primitive hit, also for lost returns
     assert_array_equal(got[0], want[0])
     keep = want[0]
@@ -279,7 +367,7 @@ def test_lidar_kernel_matches_reference(gap, enclosed):
     for k in (1, 2, 3):  # range, intensity, point at the scan start
         assert_allclose(got[k][keep], want[k][keep], **TOL["synthetic_vs_reference"])
     assert_array_equal(np.isnan(got[1]), ~keep)
-    if gap > 0:
+    if gap > 0 and not off & tx.OFF_MATERIALS:
         assert (want[2][keep] == 255.0).any()  # a retro-reflector saturates
 
 
@@ -288,7 +376,8 @@ def test_lidar_parallel_equals_serial():
     for enclosed in (False, True):
         scene = _scene(rng, enclosed=enclosed)
         scan = _scan(rng, 5000)
-        serial = _returns_kernel(scene, 1.0, scan)
-        parallel = _returns_kernel(scene, 1.0, scan, parallel=True)
-        for a, b in zip(serial, parallel):
-            assert_array_equal(a, b)
+        for off in (0, ALL_OFF):
+            serial = _returns_kernel(scene, 1.0, scan, off=off)
+            parallel = _returns_kernel(scene, 1.0, scan, off=off, parallel=True)
+            for a, b in zip(serial, parallel):
+                assert_array_equal(a, b)

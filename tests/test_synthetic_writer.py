@@ -151,6 +151,76 @@ def test_cli_user_errors(tmp_path, capsys):
     (tmp_path / "file").write_text("x")
     assert main(["synth", str(tmp_path / "file")]) == 2
     assert "not a folder" in capsys.readouterr().err
+    assert main(["synth", str(tmp_path / "b"), "--without", "optics,shadow"]) == 2
+    err = capsys.readouterr().err
+    assert len(err.strip().splitlines()) == 1 and "Traceback" not in err
+    assert "--without: unknown effect 'shadow'; expected some of shading, shadows," in err
+    assert "lidar-falloff, motion" in err
+    assert not (tmp_path / "b" / "ground_truth.json").exists()
+
+
+def test_motion_compensated_files(tmp_path):
+    """``without=("motion",)``: one cloud per pair, deskewed with the true trajectory, t = 0."""
+    config = _config(without=("motion",))
+    truth = export_dataset(config, tmp_path)
+    assert truth["without"] == ["motion"] and truth["modality_gap"] == 1.0
+    seq = generate_sequence(config)
+    assert len(seq.scans) == 3 and seq.motion.kind == "nod"  # a moving rig ...
+    assert sorted(os.listdir(tmp_path)) == [  # ... written as a static one
+        "camera.yaml",
+        "ground_truth.json",
+        "pair_000.pcd",
+        "pair_000.png",
+    ]
+    cloud = read_pointcloud(tmp_path / "pair_000.pcd")
+    points, intensities = seq.dense_cloud()
+    assert_array_equal(cloud.points, points.astype(np.float32))
+    assert_array_equal(cloud.intensity, intensities.astype(np.float32))
+    assert np.all(cloud.times == 0.0)
+    info = truth["pairs"][0]
+    assert info["scan_stamps_ns"] == [info["image_stamp_ns"]]
+    assert info["num_points"] == len(points)
+    assert "scans" not in info and "T_world_lidar_scan_begin" not in info
+    # the image and the simulated sweeps are those of the same pair without the switch
+    plain = generate_sequence(_config())
+    assert_array_equal(seq.image, plain.image)
+    for a, b in zip(seq.scans, plain.scans):
+        assert_array_equal(a.points, b.points)
+    # preprocessing only accumulates: a static integration of the same points (2 mm voxels)
+    work = tmp_path / "work"
+    args = ["--points", str(tmp_path / "pair_000.pcd"), "--image", str(tmp_path / "pair_000.png")]
+    camera = str(tmp_path / "camera.yaml")
+    assert main(["-q", "preprocess", *args, "--camera", camera, str(work)]) == 0
+    summary = json.loads((work / "calib.json").read_text())["nbcalib"]["preprocess"]["pairs"]
+    (pair,) = summary.values()
+    assert pair["mode"] == "static" and 0.99 * len(points) < pair["points"] <= len(points)
+
+
+def test_motion_compensated_bag(tmp_path):
+    config = _config(without=("motion", "lidar-noise"))
+    truth = export_dataset(config, tmp_path, fmt="mcap")
+    seq = generate_sequence(config)
+    ((stamp, cloud),) = read_pointclouds(tmp_path / truth["pairs"][0]["bag"])
+    ((image_stamp, _),) = read_images(tmp_path / truth["pairs"][0]["bag"])
+    assert stamp == image_stamp == truth["pairs"][0]["image_stamp_ns"]
+    points, _ = seq.dense_cloud()
+    assert_array_equal(cloud.points, points.astype(np.float32))
+    assert np.all(cloud.times == 0.0)
+    assert truth["without"] == ["lidar-noise", "motion"]
+    assert truth["pairs"][0]["lidar_config"]["range_noise"] == 0.0  # the LiDAR as simulated
+
+
+def test_cli_without(tmp_path, capsys):
+    out = tmp_path / "out"
+    args = ["synth", str(out), "--lidar", "livox", "--duration", "0.1", "--image-size", "64x48"]
+    assert main([*args, "--seed", "2"]) == 0
+    default = json.loads((out / "ground_truth.json").read_text())
+    assert default["without"] == []
+    image = read_image(out / "pair_000.png")
+    assert main([*args, "--seed", "2", "--without", " optics, shading ,optics"]) == 0
+    truth = json.loads((out / "ground_truth.json").read_text())
+    assert truth["without"] == ["shading", "optics"]
+    assert not np.array_equal(read_image(out / "pair_000.png"), image)
 
 
 @pytest.mark.slow

@@ -6,6 +6,7 @@ import argparse
 import time
 
 from nbcalib.commands._args import add_verbosity_arguments
+from nbcalib.synthetic.effects import DESCRIPTIONS
 
 LIDARS = ("spinning16", "spinning32", "spinning64", "spinning128", "livox")
 CAMERAS = (
@@ -33,7 +34,14 @@ pair either pair_NNN.png + pair_NNN.pcd (all scans, t = seconds since the image;
 also gets pair_NNN_scans/scan_MMMM.pcd, one per scan) or one bag (ROS 1 .bag, ROS 2 sqlite3 or
 mcap folder) with /points (PointCloud2: x, y, z, intensity, t, ring), /image, /camera_info and
 /tf_static (lidar -> camera).
-"""
+
+--without EFFECTS turns single camera/LiDAR differences off, each on its own, to measure what
+each one costs a calibration (none by default: the rig above, bit for bit); ground_truth.json
+records them as "without". lidar-texture, materials and elements act on the LiDAR's designed
+reflectivity, so in proportion to --modality-gap (at 0 the LiDAR already sees the camera's
+albedo, camera texture included); camera-texture acts on the camera, and through the albedo on
+the LiDAR. With all of them the two sensors are as alike as this rig can make them:
+""" + "".join(f"  {name:<15} {text}\n" for name, text in DESCRIPTIONS.items())
 
 EPILOG = """\
 examples:
@@ -42,6 +50,7 @@ examples:
   nbcalib synth out --lidar spinning16 --format bag1 --duration 4 --image-size 640x480
   nbcalib synth out --lidar spinning128 --scene street --motion drive --format mcap
   nbcalib synth out --T-lidar-camera 0.05,-0.1,0.02,0.5,-0.5,0.5,-0.5
+  nbcalib synth out --lidar spinning64 --without motion,lidar-noise,optics
   nbcalib evaluate work --ground-truth out/ground_truth.json
 """
 
@@ -54,6 +63,17 @@ def _image_size(text: str) -> tuple[int, int]:
     if width < 16 or height < 16:
         raise argparse.ArgumentTypeError(f"image size must be at least 16x16, got {text!r}")
     return width, height
+
+
+def _without(text: str) -> tuple[str, ...]:
+    """The effects of ``--without`` (comma-separated), checked; a one-line InputError if not."""
+    from nbcalib.errors import InputError
+    from nbcalib.synthetic.effects import check_effects
+
+    try:
+        return check_effects(text)
+    except ValueError as exc:
+        raise InputError(f"--without: {exc}") from None
 
 
 def add_parser(subparsers, formatter_class) -> argparse.ArgumentParser:
@@ -110,6 +130,12 @@ def add_parser(subparsers, formatter_class) -> argparse.ArgumentParser:
         help="camera/LiDAR texture gap in [0, 1] (0: LiDAR reflectivity = camera albedo)",
     )
     p.add_argument(
+        "--without",
+        default=None,
+        metavar="EFFECTS",
+        help="comma-separated camera/LiDAR differences to switch off (listed above; default: none)",
+    )
+    p.add_argument(
         "--T-lidar-camera",
         dest="T_lidar_camera",
         default=None,
@@ -145,6 +171,7 @@ def run(args) -> int:
         raise InputError(f"--duration must be > 0 seconds, got {args.duration}")
     if not 0.0 <= args.modality_gap <= 1.0:
         raise InputError(f"--modality-gap must be in [0, 1], got {args.modality_gap}")
+    without = _without(args.without or "")
     T_camera_lidar = None
     if args.T_lidar_camera is not None:
         from nbcalib.transforms import invert_T, pose_from_xyz_quat
@@ -167,6 +194,7 @@ def run(args) -> int:
         image_size=args.image_size,
         color=args.color is not False,
         modality_gap=args.modality_gap,
+        without=without,
         parallel=args.parallel,
     )
     start = time.perf_counter()

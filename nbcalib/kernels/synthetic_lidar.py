@@ -16,7 +16,12 @@ looks up the poses. Per beam ``r``, semantics shared with the slow reference
 - a kept return has the intensity ``255 clip(v (1 + intensity_noise[r]), 0, 1)`` with ``v = 1``
   on a retro-reflector and ``min(signal, 1)`` elsewhere, and its point in the LiDAR frame at the
   scan start is ``start_rotation.T @ (origin + range d - start_position)``; rows of lost returns
-  in ``out_start`` are left as they were.
+  in ``out_start`` are left as they were;
+- ``off`` is passed to the texture (the ``OFF_*`` bits of
+  :mod:`nbcalib.kernels.synthetic_texture`). The LiDAR's own switches of ``nbcalib synth
+  --without`` are plain parameters: ``lidar-noise`` zeroes the noise draws, ``dropout`` and
+  ``beam_divergence``; ``lidar-falloff`` zeroes both exponents, so that the signal is the
+  reflectivity itself.
 """
 
 from __future__ import annotations
@@ -36,6 +41,7 @@ def _returns_body(
     order,
     materials,
     gap,
+    off,
     rotations,
     positions,
     which,
@@ -57,7 +63,8 @@ def _returns_body(
     ``params`` = (min_range, max_range, reach, dropout, incidence_exponent, range_exponent,
     reference_range, min_signal, beam_divergence). Beam ``r`` fires from pose ``which[r]``
     (``rotations`` R_world_lidar, ``positions`` t_world_lidar); ``out_start`` is its (noisy)
-    point in the LiDAR frame at the scan start (pose ``start_rotation``, ``start_position``).
+    point in the LiDAR frame at the scan start (pose ``start_rotation``, ``start_position``);
+    ``off``: texture bits.
     """
     min_range, max_range, reach, dropout = params[0], params[1], params[2], params[3]
     incidence_exponent, range_exponent, reference_range = params[4], params[5], params[6]
@@ -86,7 +93,7 @@ def _returns_body(
             cos_incidence = abs(nx * dx + ny * dy + nz * dz)
             fw = t * divergence / max(cos_incidence, 0.15)
             _, _, _, reflectivity, drop, retro = _material_at(
-                prims, materials, i, face, s, u, fw, gap, False, True
+                prims, materials, i, face, s, u, fw, gap, off, False, True
             )
             distance = t + range_noise[r]
             if distance < min_range or distance > max_range or cos_incidence <= 0.02:

@@ -13,7 +13,12 @@ frame), semantics shared with the slow reference :mod:`nbcalib.reference.synthet
   ``ambient (0.7 + 0.3 n_z) + sun_irradiance max(0, n . s) [lit]
   + sum_k power_k max(0, n . l_k) / max(r_k, 0.3)**2 [lit]``; shadow rays start at
   ``o + t d + 1e-4 n`` and look for any hit in ``(0, inf)`` towards the sun and
-  ``(0, r_k - 1e-3)`` towards light ``k`` at distance ``r_k`` (``shadows=False``: all lit).
+  ``(0, r_k - 1e-3)`` towards light ``k`` at distance ``r_k`` (``shadows=False``: all lit);
+- ``shading=False`` (``nbcalib synth --without shading``): the irradiance is the constant
+  ``ambient + sun_irradiance`` at every hit (no normal, no sun angle, no point lights, hence no
+  shadow rays either), so the radiance is the albedo times a constant; the sky is unchanged;
+- ``off`` is passed to the texture (the ``OFF_*`` bits of
+  :mod:`nbcalib.kernels.synthetic_texture`).
 """
 
 from __future__ import annotations
@@ -35,6 +40,7 @@ def _shade_body(
     order,
     materials,
     gap,
+    off,
     origin,
     directions,
     pixel_angle,
@@ -44,6 +50,7 @@ def _shade_body(
     sky_top,
     sky_horizon,
     shadows,
+    shading,
     out_radiance,
     out_t,
     out_prim,
@@ -51,7 +58,8 @@ def _shade_body(
     """Linear radiance of each pixel's ray: cast, texture, ambient + sun + point lights, shadows.
 
     ``sun`` = (unit direction towards the sun, irradiance); ``lights`` (L, 4) = (x, y, z, power).
-    ``out_t`` gets the hit distance (``inf`` for the sky, NaN for an invalid ray).
+    ``out_t`` gets the hit distance (``inf`` for the sky, NaN for an invalid ray). ``shading``
+    False: every hit gets the irradiance ``ambient + sun[3]``; ``off``: texture bits.
     """
     n = directions.shape[0]
     ox, oy, oz = origin[0], origin[1], origin[2]
@@ -81,8 +89,14 @@ def _shade_body(
             cos_incidence = abs(nx * dx + ny * dy + nz * dz)
             fw = t * pixel_angle[r] / max(cos_incidence, 0.15)
             red, green, blue, _, _, _ = _material_at(
-                prims, materials, i, face, s, u, fw, gap, True, False
+                prims, materials, i, face, s, u, fw, gap, off, True, False
             )
+            if not shading:
+                flat = ambient + sun[3]
+                out_radiance[r, 0] = red * flat
+                out_radiance[r, 1] = green * flat
+                out_radiance[r, 2] = blue * flat
+                continue
             # shadow rays start a little off the surface, on the side the camera sees
             px = ox + t * dx + 1e-4 * nx
             py = oy + t * dy + 1e-4 * ny

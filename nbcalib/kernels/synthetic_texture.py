@@ -35,6 +35,13 @@ Semantics shared with the slow reference :mod:`nbcalib.reference.synthetic_textu
   the designed reflectivity ``max(0, lerp(RA, RB, m) (1 + v / 2) (1 + lidar_noise
   (2 fbm(seed + 29) - 1)))``, clipped to 1 unless retro-reflective (retro needs ``gap > 0``),
   and the LiDAR reflectivity ``(1 - gap) luminance(albedo) + gap designed``.
+- ``off`` is a bit mask of modality differences switched off (``nbcalib synth --without``,
+  :mod:`nbcalib.synthetic.effects`); 0 is the model above, bit for bit.
+  :data:`OFF_CAMERA_TEXTURE`: the camera noise factor ``(1 + camera_noise (...))`` is 1;
+  :data:`OFF_LIDAR_TEXTURE`: the LiDAR noise factor is 1; :data:`OFF_ELEMENTS`: the LiDAR tone
+  is ``1 + v`` (as the camera's) instead of ``1 + v / 2``; :data:`OFF_MATERIALS`:
+  ``lerp(RA, RB, m)`` is replaced by ``luminance(lerp(A, B, m))`` (the camera's colours), no
+  spot is retro-reflective and no return is lost on the material (dropout 0).
 """
 
 from __future__ import annotations
@@ -78,6 +85,12 @@ MAT_SIZE = 16
 
 #: Rec. 709 luminance weights of linear RGB
 LUMA = (0.2126, 0.7152, 0.0722)
+
+# --- bits of ``off``: camera/LiDAR texture differences switched off --------------------------
+OFF_CAMERA_TEXTURE = 1  #: no camera-only fBm texture
+OFF_LIDAR_TEXTURE = 2  #: no LiDAR-only fBm texture
+OFF_MATERIALS = 4  #: LiDAR reflectivity pattern = luminance of the camera's colours
+OFF_ELEMENTS = 8  #: per-element tone reaches the LiDAR at full strength
 
 
 # --- noise ----------------------------------------------------------------------------------
@@ -243,28 +256,32 @@ def _clip01(x):
 
 
 @jit
-def _material_at(prims, materials, i, face, s, u, fw, gap, need_camera, need_lidar):
+def _material_at(prims, materials, i, face, s, u, fw, gap, off, need_camera, need_lidar):
     """What both sensors see where a ray hit primitive ``i``.
 
     Returns ``(red, green, blue, reflectivity, dropout, retro)``: the linear albedo in [0, 1],
     the LiDAR reflectivity (above 1 only on retro-reflectors), the extra probability of a lost
     return, and whether the spot is retro-reflective. ``(s, u)`` and the footprint ``fw`` are in
-    metres, ``gap`` is the modality gap. A modality not needed (``need_camera`` /
-    ``need_lidar`` False) is skipped and returned as NaN, except that the LiDAR needs the
-    camera's albedo when ``gap < 1``.
+    metres, ``gap`` is the modality gap and ``off`` the bit mask of differences switched off
+    (``OFF_*``, module docstring). A modality not needed (``need_camera`` / ``need_lidar``
+    False) is skipped and returned as NaN, except that the LiDAR needs the camera's albedo when
+    ``gap < 1``.
     """
     row = materials[int(prims[i, PRIM_MATERIAL])]
     seed = int(row[MAT_SEED]) + 7919 * i + 131 * face
     kind = int(row[MAT_PATTERN])
     m, v = _pattern(kind, s, u, row[MAT_SCALE], seed, fw)
     ns = row[MAT_NOISE_SCALE]
+    a = MAT_COLOR_A
+    b = MAT_COLOR_B
     red = green = blue = reflectivity = np.nan
     luminance = 0.0
     if need_camera or (need_lidar and gap < 1.0):
-        noise = _fbm(s / ns, u / ns, seed + 17, fw / ns)
-        shade = (1.0 + v) * (1.0 + row[MAT_CAMERA_NOISE] * (2.0 * noise - 1.0))
-        a = MAT_COLOR_A
-        b = MAT_COLOR_B
+        camera_tex = 1.0
+        if not (off & OFF_CAMERA_TEXTURE):
+            noise = _fbm(s / ns, u / ns, seed + 17, fw / ns)
+            camera_tex = 1.0 + row[MAT_CAMERA_NOISE] * (2.0 * noise - 1.0)
+        shade = (1.0 + v) * camera_tex
         red = _clip01((row[a] + (row[b] - row[a]) * m) * shade)
         green = _clip01((row[a + 1] + (row[b + 1] - row[a + 1]) * m) * shade)
         blue = _clip01((row[a + 2] + (row[b + 2] - row[a + 2]) * m) * shade)
@@ -272,21 +289,34 @@ def _material_at(prims, materials, i, face, s, u, fw, gap, need_camera, need_lid
     retro = False
     dropout = 0.0
     if need_lidar:
-        noise = _fbm(s / ns, u / ns, seed + 29, fw / ns)
-        lidar_tex = 1.0 + row[MAT_LIDAR_NOISE] * (2.0 * noise - 1.0)
-        ra = row[MAT_REFL_A]
-        designed = max(0.0, (ra + (row[MAT_REFL_B] - ra) * m) * (1.0 + 0.5 * v) * lidar_tex)
-        retro = row[MAT_RETRO] > 0.0 and designed > 1.0 and gap > 0.0
+        lidar_tex = 1.0
+        if not (off & OFF_LIDAR_TEXTURE):
+            noise = _fbm(s / ns, u / ns, seed + 29, fw / ns)
+            lidar_tex = 1.0 + row[MAT_LIDAR_NOISE] * (2.0 * noise - 1.0)
+        tone = (1.0 + v) if off & OFF_ELEMENTS else (1.0 + 0.5 * v)
+        if off & OFF_MATERIALS:
+            # the camera's colour pattern, without its texture and tone
+            base = (
+                LUMA[0] * (row[a] + (row[b] - row[a]) * m)
+                + LUMA[1] * (row[a + 1] + (row[b + 1] - row[a + 1]) * m)
+                + LUMA[2] * (row[a + 2] + (row[b + 2] - row[a + 2]) * m)
+            )
+        else:
+            ra = row[MAT_REFL_A]
+            base = ra + (row[MAT_REFL_B] - ra) * m
+        designed = max(0.0, base * tone * lidar_tex)
+        retro = not (off & OFF_MATERIALS) and row[MAT_RETRO] > 0.0 and designed > 1.0 and gap > 0.0
         if not retro:
             designed = min(designed, 1.0)
         reflectivity = (1.0 - gap) * luminance + gap * designed
-        # windows drop returns on the glass only; other materials everywhere
-        dropout = gap * row[MAT_DROPOUT] * (m if kind == WINDOWS else 1.0)
+        if not (off & OFF_MATERIALS):
+            # windows drop returns on the glass only; other materials everywhere
+            dropout = gap * row[MAT_DROPOUT] * (m if kind == WINDOWS else 1.0)
     return red, green, blue, reflectivity, dropout, retro
 
 
 def _surface_properties_body(
-    prims, materials, prim, face, surface, footprint, gap, albedo, reflectivity, dropout, retro
+    prims, materials, prim, face, surface, footprint, gap, off, albedo, reflectivity, dropout, retro
 ):
     for r in prange(prim.shape[0]):
         i = prim[r]
@@ -307,6 +337,7 @@ def _surface_properties_body(
             surface[r, 1],
             footprint[r],
             gap,
+            off,
             True,
             True,
         )

@@ -18,7 +18,7 @@ from nbcalib.reference.synthetic_texture import material_at
 __all__ = ["returns"]
 
 
-def returns(prims, materials, gap, poses, beams, params, start_pose):
+def returns(prims, materials, gap, poses, beams, params, start_pose, *, off=0):
     """Every beam of a scan, the slow way (reference of ``_returns``).
 
     Parameters
@@ -43,6 +43,9 @@ def returns(prims, materials, gap, poses, beams, params, start_pose):
     start_pose : tuple of 2 arrays
         ``(start_rotation, start_position)``: ``R_world_lidar`` (3, 3) and ``t_world_lidar`` (3,)
         at the scan start, metres.
+    off : int
+        Bit mask of texture differences switched off (``OFF_*`` of
+        :mod:`nbcalib.kernels.synthetic_texture`).
 
     Returns
     -------
@@ -80,7 +83,7 @@ def returns(prims, materials, gap, poses, beams, params, start_pose):
         cos_incidence = abs(float(normal @ direction))
         footprint = t * divergence / max(cos_incidence, 0.15)
         _, reflectivity, material_dropout, retro = material_at(
-            prims, materials, int(hit), int(face), surface[0], surface[1], footprint, gap
+            prims, materials, int(hit), int(face), surface[0], surface[1], footprint, gap, off
         )
         distance = t + range_noise[r]
         if not min_range <= distance <= max_range or cos_incidence <= 0.02:

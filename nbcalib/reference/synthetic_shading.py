@@ -52,7 +52,19 @@ def _irradiance(prims, point, normal, sun, ambient, lights, shadows):
     return irradiance
 
 
-def radiance(prims, materials, gap, origin, directions, pixel_angle, lighting, shadows):
+def radiance(
+    prims,
+    materials,
+    gap,
+    origin,
+    directions,
+    pixel_angle,
+    lighting,
+    shadows,
+    *,
+    off=0,
+    shading=True,
+):
     """Linear RGB radiance along camera rays, the slow way (reference of ``_shade``).
 
     Parameters
@@ -76,6 +88,12 @@ def radiance(prims, materials, gap, origin, directions, pixel_angle, lighting, s
         ``sky_top`` and ``sky_horizon`` (3,) the sky radiance at the zenith and the horizon.
     shadows : bool
         Cast shadow rays.
+    off : int
+        Bit mask of texture differences switched off (``OFF_*`` of
+        :mod:`nbcalib.kernels.synthetic_texture`).
+    shading : bool
+        False: the irradiance is ``ambient + sun irradiance`` at every hit (no normal, no point
+        lights, no shadows).
 
     Returns
     -------
@@ -104,9 +122,12 @@ def radiance(prims, materials, gap, origin, directions, pixel_angle, lighting, s
         out_t[r], out_prim[r] = t, i
         cos_incidence = abs(float(normal @ d))
         footprint = t * pixel_angle[r] / max(cos_incidence, 0.15)
-        albedo, _, _, _ = material_at(prims, materials, i, face, s, u, footprint, gap)
-        # shadow rays start a little off the surface, on the side the camera sees
-        point = origin + t * d + 1e-4 * normal
-        light = _irradiance(prims, point, normal, sun, ambient, lights, shadows)
+        albedo, _, _, _ = material_at(prims, materials, i, face, s, u, footprint, gap, off)
+        if shading:
+            # shadow rays start a little off the surface, on the side the camera sees
+            point = origin + t * d + 1e-4 * normal
+            light = _irradiance(prims, point, normal, sun, ambient, lights, shadows)
+        else:
+            light = ambient + sun[3]  # the same light everywhere
         out[r] = np.asarray(albedo) * light
     return out, out_t, out_prim

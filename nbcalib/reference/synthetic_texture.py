@@ -194,8 +194,10 @@ def pattern(kind, s, u, scale, seed, footprint):
     return _PATTERNS[kind](s, u, scale, seed, footprint)
 
 
-def material_at(prims, materials, i, face, s, u, footprint, gap):
+def material_at(prims, materials, i, face, s, u, footprint, gap, off=0):
     """What both sensors see on primitive ``i`` (reference of ``_material_at``, both needed).
+
+    ``off`` is the kernels' bit mask of texture differences switched off (``tx.OFF_*``).
 
     Returns
     -------
@@ -208,37 +210,50 @@ def material_at(prims, materials, i, face, s, u, footprint, gap):
     retro : bool
         The spot is retro-reflective.
     """
+    camera_texture = not (off & tx.OFF_CAMERA_TEXTURE)
+    lidar_texture = not (off & tx.OFF_LIDAR_TEXTURE)
+    designed_materials = not (off & tx.OFF_MATERIALS)
+    half_tone = not (off & tx.OFF_ELEMENTS)
     row = materials[int(prims[i, PRIM_MATERIAL])]
     seed = int(row[tx.MAT_SEED]) + 7919 * i + 131 * face
     kind = int(row[tx.MAT_PATTERN])
     m, v = pattern(kind, s, u, row[tx.MAT_SCALE], seed, footprint)
     ns = row[tx.MAT_NOISE_SCALE]
-
-    # camera: the two colours blended by the mask, the tone and a camera-only stain texture
-    stains = fbm(s / ns, u / ns, seed + 17, footprint / ns)
-    shade = (1.0 + v) * (1.0 + row[tx.MAT_CAMERA_NOISE] * (2.0 * stains - 1.0))
     colour_a = row[tx.MAT_COLOR_A : tx.MAT_COLOR_A + 3]
     colour_b = row[tx.MAT_COLOR_B : tx.MAT_COLOR_B + 3]
-    albedo = tuple(
-        min(1.0, max(0.0, lerp(float(a), float(b), m) * shade)) for a, b in zip(colour_a, colour_b)
-    )
+    colours = [lerp(float(a), float(b), m) for a, b in zip(colour_a, colour_b)]
+
+    # camera: the two colours blended by the mask, the tone and a camera-only stain texture
+    stain_texture = 1.0
+    if camera_texture:
+        stains = fbm(s / ns, u / ns, seed + 17, footprint / ns)
+        stain_texture = 1.0 + row[tx.MAT_CAMERA_NOISE] * (2.0 * stains - 1.0)
+    shade = (1.0 + v) * stain_texture
+    albedo = tuple(min(1.0, max(0.0, c * shade)) for c in colours)
     luminance = sum(w * c for w, c in zip(tx.LUMA, albedo))
 
-    # LiDAR: the two reflectivities blended by the mask, half the tone, a LiDAR-only texture
-    paint = fbm(s / ns, u / ns, seed + 29, footprint / ns)
-    lidar_texture = 1.0 + row[tx.MAT_LIDAR_NOISE] * (2.0 * paint - 1.0)
-    blended = lerp(row[tx.MAT_REFL_A], row[tx.MAT_REFL_B], m)
-    designed = max(0.0, blended * (1.0 + 0.5 * v) * lidar_texture)
-    retro = bool(row[tx.MAT_RETRO] > 0.0 and designed > 1.0 and gap > 0.0)
+    # LiDAR: the two reflectivities blended by the mask, half the tone, a LiDAR-only texture;
+    # without materials, the camera's colours (their luminance) instead of the reflectivities
+    paint_texture = 1.0
+    if lidar_texture:
+        paint = fbm(s / ns, u / ns, seed + 29, footprint / ns)
+        paint_texture = 1.0 + row[tx.MAT_LIDAR_NOISE] * (2.0 * paint - 1.0)
+    if designed_materials:
+        blended = lerp(row[tx.MAT_REFL_A], row[tx.MAT_REFL_B], m)
+    else:
+        blended = sum(w * c for w, c in zip(tx.LUMA, colours))
+    tone = 1.0 + 0.5 * v if half_tone else 1.0 + v
+    designed = max(0.0, blended * tone * paint_texture)
+    retro = bool(designed_materials and row[tx.MAT_RETRO] > 0.0 and designed > 1.0 and gap > 0.0)
     if not retro:
         designed = min(designed, 1.0)
     reflectivity = (1.0 - gap) * luminance + gap * designed
     on_glass = m if kind == tx.WINDOWS else 1.0  # windows lose returns on the glass only
-    dropout = gap * row[tx.MAT_DROPOUT] * on_glass
+    dropout = gap * row[tx.MAT_DROPOUT] * on_glass if designed_materials else 0.0
     return albedo, reflectivity, dropout, retro
 
 
-def surface_properties(prims, materials, prim, face, surface, footprint, gap):
+def surface_properties(prims, materials, prim, face, surface, footprint, gap, off=0):
     """Albedo, reflectivity, dropout and retro flag per hit (reference of ``_surface_properties``).
 
     Parameters
@@ -255,6 +270,8 @@ def surface_properties(prims, materials, prim, face, surface, footprint, gap):
         Pixel or laser spot size on the surface, metres.
     gap : float
         Modality gap in [0, 1].
+    off : int
+        Bit mask of texture differences switched off (``OFF_*`` of the kernel module).
 
     Returns
     -------
@@ -284,5 +301,6 @@ def surface_properties(prims, materials, prim, face, surface, footprint, gap):
             float(surface[r, 1]),
             float(footprint[r]),
             float(gap),
+            off,
         )
     return albedo, reflectivity, dropout, retro

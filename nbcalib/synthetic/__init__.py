@@ -12,11 +12,14 @@ Pieces, each usable alone:
 - :mod:`~nbcalib.synthetic.motion`: ground-truth trajectories (nodding, driving, static);
 - :mod:`~nbcalib.synthetic.render`: camera images through any camera model;
 - :mod:`~nbcalib.synthetic.rig`: all of it together, one pair at a time;
-- :mod:`~nbcalib.synthetic.writer`: files and bags as users have them (``nbcalib synth``).
+- :mod:`~nbcalib.synthetic.writer`: files and bags as users have them (``nbcalib synth``);
+- :mod:`~nbcalib.synthetic.effects`: switches that turn single camera/LiDAR differences off
+  (``RigConfig.without``, ``nbcalib synth --without``).
 
 The numba kernels are in :mod:`nbcalib.kernels` (``raycast``, ``synthetic_texture``,
 ``synthetic_shading``, ``synthetic_lidar``), their slow references in :mod:`nbcalib.reference`;
-the modules here hold the configurations and the validating wrappers.
+the modules here hold the configurations and the validating wrappers. Importing this package is
+cheap: numba and the modules load on first use of a name.
 
 Example
 -------
@@ -25,52 +28,33 @@ Example
 >>> seq.T_camera_lidar          # the answer a calibration should find
 """
 
-from nbcalib.synthetic.builder import SceneBuilder
-from nbcalib.synthetic.lidar import (
-    LIDAR_PRESETS,
-    LidarConfig,
-    LidarScan,
-    RosetteLidarConfig,
-    SpinningLidarConfig,
-    lidar_preset,
-    simulate_scan,
-)
-from nbcalib.synthetic.motion import MotionConfig, Trajectory, make_trajectory
-from nbcalib.synthetic.render import RenderConfig, RenderedImage, render_image
-from nbcalib.synthetic.rig import (
-    DEFAULT_DURATION,
-    RigConfig,
-    SyntheticSequence,
-    camera_lidar_overlap,
-    default_T_camera_lidar,
-    generate_sequence,
-)
-from nbcalib.synthetic.scene import Scene, SceneConfig, make_scene
-from nbcalib.synthetic.texture import Material
+from nbcalib._lazy import lazy_exports
 
-__all__ = [
-    "DEFAULT_DURATION",
-    "LIDAR_PRESETS",
-    "LidarConfig",
-    "LidarScan",
-    "Material",
-    "MotionConfig",
-    "RenderConfig",
-    "RenderedImage",
-    "RigConfig",
-    "RosetteLidarConfig",
-    "Scene",
-    "SceneBuilder",
-    "SceneConfig",
-    "SpinningLidarConfig",
-    "SyntheticSequence",
-    "Trajectory",
-    "camera_lidar_overlap",
-    "default_T_camera_lidar",
-    "generate_sequence",
-    "lidar_preset",
-    "make_scene",
-    "make_trajectory",
-    "render_image",
-    "simulate_scan",
-]
+__getattr__, __dir__, __all__ = lazy_exports(
+    "nbcalib.synthetic",
+    {
+        "builder": ("SceneBuilder",),
+        "effects": ("EFFECTS",),
+        "lidar": (
+            "LIDAR_PRESETS",
+            "LidarConfig",
+            "LidarScan",
+            "RosetteLidarConfig",
+            "SpinningLidarConfig",
+            "lidar_preset",
+            "simulate_scan",
+        ),
+        "motion": ("MotionConfig", "Trajectory", "make_trajectory"),
+        "render": ("RenderConfig", "RenderedImage", "render_image"),
+        "rig": (
+            "DEFAULT_DURATION",
+            "RigConfig",
+            "SyntheticSequence",
+            "camera_lidar_overlap",
+            "default_T_camera_lidar",
+            "generate_sequence",
+        ),
+        "scene": ("Scene", "SceneConfig", "make_scene"),
+        "texture": ("Material",),
+    },
+)

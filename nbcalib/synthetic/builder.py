@@ -19,6 +19,7 @@ import numpy as np
 from nbcalib.kernels import raycast as _rc
 from nbcalib.kernels.synthetic_texture import MAT_SIZE
 from nbcalib.synthetic.bvh import build_bvh
+from nbcalib.synthetic.effects import TEXTURE_EFFECTS, check_effects
 from nbcalib.synthetic.scene import Lighting, Scene
 from nbcalib.synthetic.texture import Material
 
@@ -119,8 +120,12 @@ class SceneBuilder:
         """A sphere (an ellipsoid with equal semi-axes)."""
         return self.ellipsoid(center, (radius, radius, radius), material, name=name)
 
-    def build(self, *, lighting=None, modality_gap=1.0, kind="custom", seed=0) -> Scene:
-        """Pack everything into a :class:`Scene` (and build its hierarchy)."""
+    def build(self, *, lighting=None, modality_gap=1.0, without=(), kind="custom", seed=0) -> Scene:
+        """Pack everything into a :class:`Scene` (and build its hierarchy).
+
+        ``without``: texture differences switched off, as
+        :attr:`nbcalib.synthetic.scene.SceneConfig.without`.
+        """
         if not self._prims:
             raise ValueError("a scene needs at least one primitive")
         prims = np.ascontiguousarray(np.stack(self._prims))
@@ -134,6 +139,7 @@ class SceneBuilder:
             bvh_order=order,
             lighting=lighting if lighting is not None else Lighting(),
             modality_gap=float(modality_gap),
+            without=check_effects(without, TEXTURE_EFFECTS),
             kind=kind,
             seed=int(seed),
         )

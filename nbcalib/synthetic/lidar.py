@@ -19,6 +19,10 @@ glass-like materials, at grazing incidence and when the returned signal is too w
 ``255 * reflectivity * cos(incidence)**incidence_exponent * min(1, reference_range /
 range)**range_exponent``, with multiplicative noise, clipped to [0, 255]; retro-reflectors
 saturate at 255 at any incidence.
+
+``nbcalib synth --without lidar-noise`` and ``--without lidar-falloff`` are configurations of
+these fields (:func:`nbcalib.synthetic.effects.lidar_without`); the texture switches come with
+the scene (``Scene.without``).
 """
 
 from __future__ import annotations
@@ -32,6 +36,7 @@ import numpy as np
 from nbcalib.kernels import synthetic_lidar as _sl
 from nbcalib.synthetic.motion import Trajectory
 from nbcalib.synthetic.scene import Scene
+from nbcalib.synthetic.texture import texture_bits
 
 __all__ = [
     "LIDAR_PRESETS",
@@ -361,7 +366,7 @@ def simulate_scan(
     Parameters
     ----------
     scene : Scene
-        What the beams hit (world frame).
+        What the beams hit (world frame), with its modality gap and texture switches.
     lidar : LidarConfig
         The sensor (pattern, noise, intensity model).
     trajectory : Trajectory
@@ -429,6 +434,7 @@ def simulate_scan(
         scene.bvh_order,
         scene.materials,
         float(scene.modality_gap),
+        texture_bits(scene.without),
         np.ascontiguousarray(R_world_lidar),
         np.ascontiguousarray(t_world_lidar),
         np.ascontiguousarray(which.ravel(), dtype=np.int64),

@@ -10,6 +10,12 @@ with shadows from shadow rays towards the sun and the point lights (camera only:
 reflectivity, not light). Rays that hit nothing see the sky. The linear image is exposed
 automatically (its 95th percentile maps to 0.85), blurred a little as real optics do, converted
 to sRGB-like gamma, given shot and read noise, and quantised to 8 bits: grey (luminance) or RGB.
+
+``RenderConfig(shading=False)`` replaces the irradiance by the constant ``ambient +
+sun_irradiance`` (radiance = albedo x a constant: no normals, sun angle, point lights or
+shadows); ``shadows=False`` keeps the shading without cast shadows; zero blur and noise give the
+image without optics (``nbcalib synth --without shading,shadows,optics``,
+:mod:`nbcalib.synthetic.effects`). The texture switches come with the scene (``Scene.without``).
 """
 
 from __future__ import annotations
@@ -22,6 +28,7 @@ from nbcalib.camera import CameraModel
 from nbcalib.kernels import synthetic_shading as _sh
 from nbcalib.kernels.synthetic_texture import LUMA
 from nbcalib.synthetic.scene import Scene
+from nbcalib.synthetic.texture import texture_bits
 
 __all__ = ["RenderConfig", "RenderedImage", "radiance", "render_image"]
 
@@ -46,6 +53,10 @@ class RenderConfig:
         Photon noise: standard deviation ``sqrt(shot_noise * value)``, fraction of full scale.
     shadows : bool
         Cast shadow rays.
+    shading : bool
+        Shade with the surface normal and the lights; False: every surface gets the irradiance
+        ``ambient + sun_irradiance`` (no shadows either), so the radiance is the albedo times a
+        constant (auto exposure maps it as any image).
     seed : int
         Seed of the sensor noise.
     parallel : bool
@@ -59,6 +70,7 @@ class RenderConfig:
     read_noise: float = 0.006
     shot_noise: float = 0.0008
     shadows: bool = True
+    shading: bool = True
     seed: int = 0
     parallel: bool = False
 
@@ -95,8 +107,12 @@ def _pixel_angle(bearings) -> np.ndarray:
     return np.where(np.isfinite(angle), angle, fallback)
 
 
-def radiance(scene: Scene, origin, directions, pixel_angle, *, shadows=True, parallel=False):
+def radiance(
+    scene: Scene, origin, directions, pixel_angle, *, shadows=True, shading=True, parallel=False
+):
     """Linear RGB radiance along camera rays (wraps the shading kernel; no exposure, blur, noise).
+
+    The modality gap and the texture switches are the scene's (``scene.without``).
 
     Parameters
     ----------
@@ -110,6 +126,8 @@ def radiance(scene: Scene, origin, directions, pixel_angle, *, shadows=True, par
         Angular size of each ray's pixel, radians (texture antialiasing).
     shadows : bool
         Cast shadow rays.
+    shading : bool
+        False: the irradiance is ``ambient + sun_irradiance`` everywhere (:class:`RenderConfig`).
     parallel : bool
         Use the parallel kernel (same result).
 
@@ -141,6 +159,7 @@ def radiance(scene: Scene, origin, directions, pixel_angle, *, shadows=True, par
         scene.bvh_order,
         scene.materials,
         float(scene.modality_gap),
+        texture_bits(scene.without),
         np.ascontiguousarray(origin, dtype=np.float64),
         directions,
         np.ascontiguousarray(np.broadcast_to(pixel_angle, (n,)), dtype=np.float64),
@@ -150,6 +169,7 @@ def radiance(scene: Scene, origin, directions, pixel_angle, *, shadows=True, par
         np.asarray(light.sky_top, dtype=np.float64),
         np.asarray(light.sky_horizon, dtype=np.float64),
         bool(shadows),
+        bool(shading),
         out_radiance,
         out_t,
         out_prim,
@@ -194,6 +214,7 @@ def render_image(
         directions,
         _pixel_angle(bearings.reshape(h, w, 3)),
         shadows=config.shadows,
+        shading=config.shading,
         parallel=config.parallel,
     )
     light = light.reshape(h, w, 3)
@@ -212,9 +233,10 @@ def render_image(
 
         linear = cv2.GaussianBlur(linear, (0, 0), config.blur_sigma_px).reshape(linear.shape)
     value = np.clip(linear, 0.0, 1.0) ** (1.0 / config.gamma)
-    rng = np.random.default_rng([config.seed, 0xCA3E7A])
-    sigma = np.sqrt(config.read_noise**2 + config.shot_noise * value)
-    value = value + sigma * rng.standard_normal(value.shape)
+    if config.read_noise > 0 or config.shot_noise > 0:
+        rng = np.random.default_rng([config.seed, 0xCA3E7A])
+        sigma = np.sqrt(config.read_noise**2 + config.shot_noise * value)
+        value = value + sigma * rng.standard_normal(value.shape)
     value[~valid] = 0.0
     image = np.clip(np.rint(255.0 * value), 0, 255).astype(np.uint8)
     if not config.color:

@@ -10,6 +10,12 @@ firing time (distorted by the motion, as a real sweep).
 The rig is the same for every pair of a configuration (one ``T_camera_lidar`` per ``seed``); each
 pair gets a scene, trajectory and noise of its own, derived from ``(seed, pair)``.
 
+``RigConfig.without`` switches single camera/LiDAR differences off
+(:mod:`nbcalib.synthetic.effects`): the texture ones through the scene, the camera and LiDAR ones
+through their configurations, ``motion`` through :meth:`SyntheticSequence.output_scans`, what
+:mod:`nbcalib.synthetic.writer` writes. Every random draw stays where it was, so a pair with a
+switch differs from the same pair without it by that switch only.
+
 Example
 -------
 >>> from nbcalib.synthetic import RigConfig, generate_sequence
@@ -26,6 +32,12 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from nbcalib.camera import CAMERA_MODELS, CameraModel, example_camera
+from nbcalib.synthetic.effects import (
+    TEXTURE_EFFECTS,
+    check_effects,
+    lidar_without,
+    render_without,
+)
 from nbcalib.synthetic.lidar import (
     LIDAR_PRESETS,
     LidarConfig,
@@ -87,6 +99,14 @@ class RigConfig:
         RGB images (else grey).
     modality_gap : float
         Camera/LiDAR texture gap in [0, 1] (:mod:`nbcalib.synthetic.texture`).
+    without : tuple of str
+        Camera/LiDAR differences switched off, each on its own: names of
+        :data:`nbcalib.synthetic.effects.EFFECTS` (a comma-separated string is accepted; kept in
+        that order, each once; unknown names raise ValueError). Empty (default): the full rig,
+        bit for bit. They apply on top of ``lidar_config`` and ``render_config`` too. The
+        texture switches compose with ``modality_gap`` as the effects module says: at gap 0
+        ``materials``, ``elements`` and ``lidar-texture`` change nothing, ``camera-texture``
+        acts on both sensors.
     T_camera_lidar : array_like of shape (4, 4) or None
         Ground-truth extrinsics; None: :func:`default_T_camera_lidar` of the seed.
     parallel : bool
@@ -106,6 +126,7 @@ class RigConfig:
     image_size: tuple[int, int] | None = None
     color: bool = False
     modality_gap: float = 1.0
+    without: tuple[str, ...] = ()
     T_camera_lidar: tuple | None = None
     parallel: bool = False
     lidar_config: LidarConfig | None = None
@@ -122,14 +143,16 @@ class RigConfig:
             raise ValueError(f"unknown scene {self.scene!r}; expected one of {SCENE_KINDS}")
         if self.duration is not None and not self.duration > 0:
             raise ValueError(f"duration must be > 0 s, got {self.duration}")
+        object.__setattr__(self, "without", check_effects(self.without))
         if self.T_camera_lidar is not None:
             T = np.asarray(self.T_camera_lidar, dtype=np.float64)
             invert_T(T)  # validates a rigid 4 x 4
             object.__setattr__(self, "T_camera_lidar", tuple(map(tuple, T.tolist())))
 
     def lidar_model(self) -> LidarConfig:
-        """The LiDAR configuration (preset or ``lidar_config``)."""
-        return self.lidar_config if self.lidar_config is not None else lidar_preset(self.lidar)
+        """The LiDAR configuration (preset or ``lidar_config``), LiDAR switches applied."""
+        lidar = self.lidar_config if self.lidar_config is not None else lidar_preset(self.lidar)
+        return lidar_without(lidar, self.without)
 
     def camera_object(self) -> CameraModel:
         """The camera (``camera_model`` or the example of ``camera`` at ``image_size``)."""
@@ -267,6 +290,33 @@ class SyntheticSequence:
         ]
         return np.concatenate(points), np.concatenate([s.intensities for s in self.scans])
 
+    def output_scans(self) -> tuple[LidarScan, ...]:
+        """The scans as :mod:`nbcalib.synthetic.writer` writes them.
+
+        :attr:`scans`; or, with ``"motion"`` in ``config.without``, a single scan holding every
+        point deskewed with the true trajectory into the LiDAR frame at time 0 (the world frame,
+        :meth:`dense_cloud`): time 0, stamp 0, each point's ring and primitive as simulated. It
+        is a static, perfectly deskewed cloud with the density of the moving sweep, which a
+        static integration only accumulates.
+
+        Returns
+        -------
+        tuple of LidarScan
+        """
+        if "motion" not in self.config.without:
+            return self.scans
+        points, intensities = self.dense_cloud()
+        scan = LidarScan(
+            points=points,
+            intensities=intensities,
+            times=np.zeros(len(points)),
+            rings=np.concatenate([s.rings for s in self.scans]),
+            stamp=0.0,
+            points_undistorted=points,
+            prim=np.concatenate([s.prim for s in self.scans]),
+        )
+        return (scan,)
+
 
 def _pair_seeds(seed: int, pair: int) -> dict[str, int]:
     """Independent seeds of the parts of one pair, from ``(seed, pair)``."""
@@ -300,7 +350,12 @@ def generate_sequence(
     seeds = _pair_seeds(config.seed, pair)
     lidar = config.lidar_model()
     scene = make_scene(
-        SceneConfig(kind=config.scene, seed=seeds["scene"], modality_gap=config.modality_gap)
+        SceneConfig(
+            kind=config.scene,
+            seed=seeds["scene"],
+            modality_gap=config.modality_gap,
+            without=tuple(e for e in config.without if e in TEXTURE_EFFECTS),
+        )
     )
     kind = config.motion or ("static" if lidar.kind == "rosette" else "nod")
     motion = replace(config.motion_config or MotionConfig(kind=kind), seed=seeds["motion"])
@@ -316,6 +371,7 @@ def generate_sequence(
 
     render = config.render_config or RenderConfig(color=config.color)
     render = replace(render, seed=seeds["render"], parallel=config.parallel or render.parallel)
+    render = render_without(render, config.without)
     T_world_camera = trajectory.pose(0.0) @ invert_T(T_camera_lidar)
     rendered = render_image(scene, camera, T_world_camera, render)
     if progress:

@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from nbcalib.kernels import raycast as _rc
+from nbcalib.synthetic.effects import TEXTURE_EFFECTS, check_effects
 from nbcalib.synthetic.texture import surface_properties
 
 __all__ = [
@@ -53,6 +54,10 @@ class SceneConfig:
     modality_gap : float
         Size of the camera/LiDAR texture gap in [0, 1]: 0 makes the LiDAR reflectivity the
         camera's albedo luminance, 1 the designed differences (:mod:`nbcalib.synthetic.texture`).
+    without : tuple of str
+        Texture differences switched off, names of
+        :data:`~nbcalib.synthetic.effects.TEXTURE_EFFECTS` (none: the full texture model). They
+        change what the sensors see, not the scene's layout or materials.
     sensor_height : float or None
         Height of the LiDAR above the floor or road, metres; None: 1.2 (room), 1.6 (street).
     clearance : float
@@ -62,6 +67,7 @@ class SceneConfig:
     kind: str = "room"
     seed: int = 0
     modality_gap: float = 1.0
+    without: tuple[str, ...] = ()
     sensor_height: float | None = None
     clearance: float = 1.5
 
@@ -70,6 +76,7 @@ class SceneConfig:
             raise ValueError(f"scene kind must be one of {SCENE_KINDS}, got {self.kind!r}")
         if not 0.0 <= self.modality_gap <= 1.0:
             raise ValueError(f"modality_gap must be in [0, 1], got {self.modality_gap}")
+        object.__setattr__(self, "without", check_effects(self.without, TEXTURE_EFFECTS))
         if self.clearance < 0.5:
             raise ValueError("clearance must be at least 0.5 m")
 
@@ -151,6 +158,9 @@ class Scene:
         Camera lighting.
     modality_gap : float
         Camera/LiDAR texture gap in [0, 1].
+    without : tuple of str
+        Texture differences switched off (:class:`SceneConfig`); the shading and LiDAR kernels
+        and :meth:`surface_properties` take them from here, as the gap.
     kind : str
         ``"room"``, ``"street"`` or ``"custom"``.
     seed : int
@@ -165,6 +175,7 @@ class Scene:
     bvh_order: np.ndarray
     lighting: Lighting = field(default_factory=Lighting)
     modality_gap: float = 1.0
+    without: tuple[str, ...] = ()
     kind: str = "custom"
     seed: int = 0
 
@@ -261,6 +272,7 @@ class Scene:
             hits.surface,
             footprint=footprint,
             gap=self.modality_gap,
+            without=self.without,
             parallel=parallel,
         )
 
@@ -295,7 +307,7 @@ def make_scene(config: SceneConfig | None = None, **overrides) -> Scene:
     Parameters
     ----------
     config : SceneConfig, optional
-        Kind, seed, modality gap; keyword overrides replace its fields
+        Kind, seed, modality gap, texture switches; keyword overrides replace its fields
         (``make_scene(kind="street", seed=3)``).
 
     Returns

@@ -16,6 +16,13 @@ the camera's albedo texture and ``g = 1`` (default) the designed differences (ve
 the camera and bright in the LiDAR, glass bright in the camera and weak in the LiDAR, ...).
 Shading and shadows are the camera's alone (:mod:`nbcalib.synthetic.render`).
 
+Each of these differences can be switched off on its own (``without``, names of
+:data:`nbcalib.synthetic.effects.TEXTURE_EFFECTS`; :mod:`nbcalib.synthetic.effects` says how they
+compose with the gap): ``camera-texture`` and ``lidar-texture`` drop one modality's own noise,
+``materials`` makes the designed reflectivity the luminance of the camera's colours
+``lerp(A, B, m)`` (no inversions, gains, glass dropouts or retro-reflectors), ``elements`` lets
+the per-element variation reach the LiDAR at full strength.
+
 The kernels (:mod:`nbcalib.kernels.synthetic_texture`, which lays out the table) are private
 and called through :func:`surface_properties`; their slow reference is
 :mod:`nbcalib.reference.synthetic_texture`.
@@ -28,8 +35,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from nbcalib.kernels import synthetic_texture as _tx
+from nbcalib.synthetic.effects import TEXTURE_EFFECTS, check_effects
 
-__all__ = ["PATTERNS", "Material", "surface_properties"]
+__all__ = ["PATTERNS", "Material", "surface_properties", "texture_bits"]
 
 #: pattern names of :class:`Material` -> pattern ids of the kernels
 PATTERNS = {
@@ -110,8 +118,36 @@ class Material:
         return row
 
 
+#: texture switches -> bits of the kernels' ``off`` mask
+_OFF_BITS = {
+    "camera-texture": _tx.OFF_CAMERA_TEXTURE,
+    "lidar-texture": _tx.OFF_LIDAR_TEXTURE,
+    "materials": _tx.OFF_MATERIALS,
+    "elements": _tx.OFF_ELEMENTS,
+}
+
+
+def texture_bits(without) -> int:
+    """The kernels' ``off`` bit mask of the texture switches in ``without`` (others ignored).
+
+    Parameters
+    ----------
+    without : iterable of str
+        Names of :data:`nbcalib.synthetic.effects.EFFECTS`; unknown names raise ValueError.
+
+    Returns
+    -------
+    int
+        0 when no texture switch is listed (the full texture model).
+    """
+    off = 0
+    for name in check_effects(without):
+        off |= _OFF_BITS.get(name, 0)
+    return off
+
+
 def surface_properties(
-    prims, materials, prim, face, surface, *, footprint=None, gap=1.0, parallel=False
+    prims, materials, prim, face, surface, *, footprint=None, gap=1.0, without=(), parallel=False
 ):
     """Camera albedo and LiDAR reflectivity at ray hits (wraps the texture kernel).
 
@@ -130,6 +166,9 @@ def surface_properties(
         octaves finer than it fade to their mean (antialiasing). None: 0 (no filtering).
     gap : float
         Modality gap in [0, 1] (module docstring).
+    without : tuple of str
+        Texture differences switched off, names of
+        :data:`~nbcalib.synthetic.effects.TEXTURE_EFFECTS` (module docstring).
     parallel : bool
         Use the ``prange`` kernel (rows are independent: same result as the serial one).
 
@@ -146,6 +185,7 @@ def surface_properties(
     """
     if not 0.0 <= gap <= 1.0:
         raise ValueError(f"gap must be in [0, 1], got {gap}")
+    off = texture_bits(check_effects(without, TEXTURE_EFFECTS))
     prim = np.ascontiguousarray(prim, dtype=np.int64)
     face = np.ascontiguousarray(face, dtype=np.int64)
     surface = np.ascontiguousarray(surface, dtype=np.float64)
@@ -170,6 +210,7 @@ def surface_properties(
         surface,
         footprint,
         float(gap),
+        off,
         albedo,
         reflectivity,
         dropout,

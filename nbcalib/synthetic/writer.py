@@ -15,6 +15,12 @@ PCD and PointCloud2 fields: ``x, y, z`` float32 (metres, LiDAR frame at the poin
 ``intensity`` float32 (0-255), ``t`` float32 (seconds), ``ring`` uint16. Bags hold the topics of
 :data:`TOPICS` in the frames :data:`FRAMES`; the image and the first scan share the stamp
 ``BASE_STAMP_NS + 1000 s * pair``.
+
+With ``"motion"`` in ``RigConfig.without`` each pair's points are written as one cloud already
+deskewed with the true trajectory (:meth:`~nbcalib.synthetic.rig.SyntheticSequence.output_scans`):
+``<name>.pcd`` in the LiDAR frame at the image time with ``t = 0`` and no ``<name>_scans/``
+folder, or one ``/points`` message at the image's stamp in a bag. ``ground_truth.json`` records
+the switches as ``"without"`` (a list, empty by default) next to ``"modality_gap"``.
 """
 
 from __future__ import annotations
@@ -76,17 +82,26 @@ def scan_fields(scan: LidarScan, *, time_offset: float = 0.0) -> dict[str, np.nd
 
 
 def _moving(sequence: SyntheticSequence) -> bool:
-    return sequence.motion.kind != "static" and len(sequence.scans) > 1
+    """Whether the written scans need deskewing (a moving rig, not motion-compensated)."""
+    return (
+        sequence.motion.kind != "static"
+        and len(sequence.scans) > 1
+        and "motion" not in sequence.config.without
+    )
 
 
 def write_sequence_files(sequence: SyntheticSequence, out_dir, name: str) -> dict:
-    """Write one pair as a PNG and PCD files; returns the written names (relative to out_dir)."""
+    """Write one pair as a PNG and PCD files; returns the written names (relative to out_dir).
+
+    The points are :meth:`~nbcalib.synthetic.rig.SyntheticSequence.output_scans`; a moving rig
+    (not motion-compensated) also gets one PCD per scan.
+    """
     from nbcalib.io.image import write_png
     from nbcalib.io.pcd import write_pcd
 
     out_dir = Path(out_dir)
     write_png(out_dir / f"{name}.png", sequence.image)
-    merged = [scan_fields(scan, time_offset=scan.stamp) for scan in sequence.scans]
+    merged = [scan_fields(scan, time_offset=scan.stamp) for scan in sequence.output_scans()]
     write_pcd(
         out_dir / f"{name}.pcd",
         {key: np.concatenate([f[key] for f in merged]) for key in merged[0]},
@@ -106,6 +121,9 @@ def write_sequence_files(sequence: SyntheticSequence, out_dir, name: str) -> dic
 def write_sequence_bag(sequence: SyntheticSequence, path, fmt: str, *, stamp_ns: int) -> None:
     """Write one pair as a ROS bag: tf_static, camera_info, the image, then every scan.
 
+    The scans are :meth:`~nbcalib.synthetic.rig.SyntheticSequence.output_scans` (one
+    motion-compensated cloud with ``"motion"`` in ``RigConfig.without``).
+
     Parameters
     ----------
     sequence : SyntheticSequence
@@ -124,7 +142,7 @@ def write_sequence_bag(sequence: SyntheticSequence, path, fmt: str, *, stamp_ns:
         bag.write_tf_static(stamp_ns, lidar, camera, sequence.T_lidar_camera)
         bag.write_camera_info(TOPICS["camera_info"], stamp_ns, sequence.camera, camera)
         bag.write_image(TOPICS["image"], stamp_ns, sequence.image, camera)
-        for scan in sequence.scans:
+        for scan in sequence.output_scans():
             scan_stamp = stamp_ns + round(scan.stamp * 1e9)
             bag.write_pointcloud(TOPICS["points"], scan_stamp, scan_fields(scan), lidar)
 
@@ -134,7 +152,8 @@ def ground_truth_dict(config: RigConfig, sequences_info: list[dict], T_camera_li
 
     ``T_lidar_camera`` is ``[x, y, z, qx, qy, qz, qw]`` (``p_lidar = T_lidar_camera @ p_camera``,
     the ``calib.json`` direction) and ``T_camera_lidar`` the 4 x 4 inverse; the other keys
-    describe the data (rig, LiDAR, scene, seed, pairs with their files and ground-truth poses).
+    describe the data (rig, LiDAR, scene, seed, modality gap, the differences switched off
+    ``without``, pairs with their files and ground-truth poses).
     """
     T_camera_lidar = np.asarray(T_camera_lidar, dtype=np.float64)
     T_lidar_camera = np.linalg.inv(T_camera_lidar)
@@ -146,6 +165,7 @@ def ground_truth_dict(config: RigConfig, sequences_info: list[dict], T_camera_li
         "scene": config.scene,
         "seed": config.seed,
         "modality_gap": config.modality_gap,
+        "without": list(config.without),
         "frames": FRAMES,
         "topics": TOPICS,
         "conventions": "docs/conventions.md: p_a = T_a_b p_b; quaternions xyzw; the world is "
@@ -156,11 +176,13 @@ def ground_truth_dict(config: RigConfig, sequences_info: list[dict], T_camera_li
 
 def _sequence_info(sequence: SyntheticSequence, stamp_ns: int, written: dict) -> dict:
     lidar = sequence.lidar
+    # motion-compensated: one cloud at the image time
+    stamps = sequence.scan_stamps if "motion" not in sequence.config.without else [0.0]
     info = {
         "name": pair_name(sequence.pair),
         **written,
         "image_stamp_ns": stamp_ns,
-        "scan_stamps_ns": [stamp_ns + round(s * 1e9) for s in sequence.scan_stamps],
+        "scan_stamps_ns": [stamp_ns + round(s * 1e9) for s in stamps],
         "scan_period": lidar.scan_period,
         "num_points": int(sum(len(s) for s in sequence.scans)),
         "motion": sequence.motion.kind,

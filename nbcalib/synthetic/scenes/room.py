@@ -86,7 +86,11 @@ def make_room(config: SceneConfig, rng) -> Scene:
         sky_horizon=(0.0, 0.0, 0.0),
     )
     return b.build(
-        lighting=lighting, modality_gap=config.modality_gap, kind="room", seed=config.seed
+        lighting=lighting,
+        modality_gap=config.modality_gap,
+        without=config.without,
+        kind="room",
+        seed=config.seed,
     )
 
 

@@ -81,7 +81,11 @@ def make_street(config: SceneConfig, rng) -> Scene:
         _parked_cars(b, rng, side, placer)
         _bollards(b, rng, side, placer)
     return b.build(
-        lighting=_sunlight(rng), modality_gap=config.modality_gap, kind="street", seed=config.seed
+        lighting=_sunlight(rng),
+        modality_gap=config.modality_gap,
+        without=config.without,
+        kind="street",
+        seed=config.seed,
     )
 
 
