@@ -19,7 +19,7 @@ import traceback
 
 from nbcalib import __version__
 from nbcalib.commands._args import add_verbosity_arguments
-from nbcalib.errors import InputError
+from nbcalib.errors import FAILED_STATUS, InputError, RegistrationFailed
 
 #: Command modules in the order ``--help`` lists them (the order of the method's stages).
 COMMAND_MODULES = (
@@ -158,6 +158,9 @@ def main(argv: list[str] | None = None) -> int:
     except InputError as exc:
         print(f"nbcalib {args.command}: error: {exc}", file=sys.stderr)
         return 2
+    except RegistrationFailed as exc:
+        print(f"nbcalib {args.command}: failed: {exc}", file=sys.stderr)
+        return FAILED_STATUS
     except KeyboardInterrupt:
         print(f"nbcalib {args.command}: interrupted", file=sys.stderr)
         return 130

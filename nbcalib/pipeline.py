@@ -411,16 +411,16 @@ class Calibrator:
         self.start = start
         self._forget_after("calibrate")
         calib = self._calib()
+        result = self.refinement
         if calib is not None:
             from nbcalib.transforms import invert_T, pose_error
 
-            result = self.refinement
             dt, dr = pose_error(invert_T(result.T_camera_lidar), invert_T(start.T_camera_lidar))
-            calib.set_T_camera_lidar(FINAL_STAGE, result.T_camera_lidar)
             calib.nbcalib["calibration"] = {
                 "start": start.source,
                 "start_T_lidar_camera": start.values,
                 "optimizer": cfg.optimizer,
+                "cost": cfg.cost,
                 "bins": cfg.bins,
                 "pyramid_levels": cfg.pyramid_levels,
                 "pairs": [p.name for p in pairs],
@@ -441,7 +441,44 @@ class Calibrator:
                 "at_trust_boundary": result.at_trust_boundary,
                 "start_uncertainty": _uncertainty_record(start.uncertainty),
             }
+        if result.at_trust_boundary:
+            self._refine_failed(calib, start, result)
+        if calib is not None:
+            calib.set_T_camera_lidar(FINAL_STAGE, result.T_camera_lidar)
         self._remember("calibrate", calib)
+
+    def _refine_failed(self, calib, start: Start, result) -> None:
+        """Fine registration ended on its trust region's edge: no result; say so and stop.
+
+        Its optimum lies beyond the region (the start was too far off, or the cost has no
+        minimum near it), so the pose it stopped at is no answer. ``calib.json`` keeps the
+        attempt under ``nbcalib.calibration`` (``failed``, ``attempted_T_lidar_camera``) and
+        loses any earlier result, so nothing stale looks finished; then
+        :class:`~nbcalib.errors.RegistrationFailed` (exit status 3 on the command line).
+        """
+        from nbcalib.errors import RegistrationFailed
+
+        dt, dr = result.moved
+        message = (
+            f"fine registration ran to the edge of its trust region ({100 * dt:.1f} cm / "
+            f"{dr:.2f} deg from the start; the region is {100 * result.trust_translation:g} cm / "
+            f"{result.trust_rotation_deg:g} deg): its optimum lies beyond, so it has no result. "
+            f"The start ({start.source}) is too far off, or the data hold no minimum near it: "
+            "start closer (--init, or manual picks: initial-guess --manual) or widen the region "
+            "(--trust-translation, --trust-rotation)"
+        )
+        self.refinement = None
+        if calib is not None:
+            calib.results.pop(FINAL_STAGE, None)
+            for key in ("result_times", "result_values"):
+                (calib.nbcalib.get(key) or {}).pop(FINAL_STAGE, None)
+            record = calib.nbcalib["calibration"]
+            record["failed"] = message
+            record["attempted_T_lidar_camera"] = as_stored_values(result.T_camera_lidar)
+            (calib.nbcalib.get("made") or {}).pop("calibrate", None)
+            self._made.pop("calibrate", None)
+            self.work.write_calib(calib)
+        raise RegistrationFailed(message, result)
 
     def _assess(self) -> None:
         from nbcalib.report.quality import assess

@@ -9,6 +9,8 @@ import pytest
 
 from nbcalib.camera import example_camera
 from nbcalib.cli import main
+from nbcalib.config import CalibrationConfig
+from nbcalib.errors import FAILED_STATUS
 from nbcalib.io.calib_json import read_calib_json
 from nbcalib.preprocess.lidar_image import (
     estimate_lidar_fov,
@@ -68,36 +70,45 @@ def test_calibrate_recovers_the_truth_from_init(workdir, capsys):
     assert "outer 1 (level 0): NID" in err and "level 1" not in err
 
 
-def test_a_result_held_by_the_trust_region_is_flagged_and_judged_suspect(workdir, capsys):
-    """5 cm off, a 2 cm / 0.5 deg region: the result ends on its edge; the report says so."""
+def test_a_run_held_by_the_trust_region_fails_and_writes_no_result(workdir, capsys):
+    """5 cm off, a 2 cm / 0.5 deg region: the run ends on its edge, exit 3, no result left."""
+    calib = read_calib_json(workdir.calib_path)
+    calib.set_T_camera_lidar("T_lidar_camera", np.eye(4))  # an earlier result, now stale
+    workdir.write_calib(calib)
     T_start = se3_exp(np.array([0.04, -0.03, 0.02, 0.012, -0.008, 0.01]))
     init = ",".join(f"{v:.9f}" for v in pose_to_xyz_quat(invert_T(T_start)))
-    args = ["--trust-translation", "0.02", "--trust-rotation", "0.5"]
+    args = ["--trust-translation", "0.02", "--trust-rotation", "0.5", "--force"]
     args += ["--init-uncertainty", "0.005", "0.1"]
-    assert main(["calibrate", str(workdir.path), f"--init={init}", *args]) == 0
-    assert "ON THE TRUST REGION'S EDGE" in capsys.readouterr().out
+    assert main(["calibrate", str(workdir.path), f"--init={init}", *args]) == FAILED_STATUS
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    assert err.startswith("nbcalib calibrate: failed: fine registration ran to the edge of its")
+    assert "the region is 2 cm / 0.5 deg" in err and "--init" in err
     calib = read_calib_json(workdir.calib_path)
+    assert not calib.has_result("T_lidar_camera")  # the old result went too: nothing stale
     fig = calib.nbcalib["calibration"]
     assert fig["trust_region"] == {"translation_m": 0.02, "rotation_deg": 0.5}
-    assert fig["at_trust_boundary"] is True
+    assert fig["at_trust_boundary"] is True and fig["failed"] in err
     assert fig["start_uncertainty"] == {"translation_m": 0.005, "rotation_deg": 0.1}
     moved = fig["change_from_start"]
     assert moved["translation_m"] <= 0.02 + 1e-9 and moved["rotation_deg"] <= 0.5 + 1e-9
-    assert calib.nbcalib["config"]["refine"]["trust_translation"] == 0.02
+    assert len(fig["attempted_T_lidar_camera"]) == 7
+    # nothing to evaluate or report: a user error each, naming the file
+    assert main(["evaluate", str(workdir.path), "--ground-truth", str(workdir.calib_path)]) == 2
+    assert main(["report", str(workdir.path)]) == 2
+    assert "calib.json" in capsys.readouterr().err
 
-    # the report, run on its own, reads the region and the start's uncertainty back
-    assert main(["report", str(workdir.path)]) == 0
-    out = capsys.readouterr().out
-    assert "verdict: suspect" in out and "reached the trust region around the start" in out
-    assert "the start's (stated, 0.5 cm, 0.10 deg) and the result's uncertainties allow" in out
-    assert "from the start" in out and "ON ITS EDGE" in out
-    quality = read_calib_json(workdir.calib_path).nbcalib["quality"]
-    move = quality["move_from_start"]
-    assert move["at_trust_boundary"] is True
-    assert move["start_uncertainty"]["source"] == "stated"
-    assert move["allowed_translation_m"] < move["translation_m"]
-    page = (workdir.path / "report" / "index.html").read_text()
-    assert "Move from the start" in page and "ON ITS EDGE" in page
+
+def test_the_api_raises_when_the_run_ends_on_the_trust_region(workdir):
+    from nbcalib.errors import RegistrationFailed
+    from nbcalib.pipeline import Calibrator
+    from nbcalib.products import Start
+
+    config = CalibrationConfig(refine=RefineConfig(trust_translation=0.02, trust_rotation_deg=0.5))
+    T_start = se3_exp(np.array([0.04, -0.03, 0.02, 0.012, -0.008, 0.01]))
+    start = Start.from_values(pose_to_xyz_quat(invert_T(T_start)), "--init")
+    with pytest.raises(RegistrationFailed, match="edge of its trust region") as info:
+        Calibrator(config, workdir=workdir.path).run(init=start, only="calibrate")
+    assert info.value.result.at_trust_boundary
 
 
 def test_calibrate_starts_from_the_initial_guess_in_calib_json(workdir):

@@ -113,7 +113,9 @@ def _pair(rng, n_per_plane):
 def test_build_cost_is_the_point_weighted_mean_of_class_nids(rng):
     pair, truth = _pair(rng, (7000, 8000, 9000))
     pair.classes = truth.astype(np.int8)  # given classes are used as they are
-    config = RefineConfig(hidden_point_removal=False, parallel=False, min_class_points=1000)
+    config = RefineConfig(
+        cost="nid", hidden_point_removal=False, parallel=False, min_class_points=1000
+    )
     T = np.eye(4)
     cost, counts = build_cost([pair], T, config)
     assert len(cost.costs) == 3

@@ -211,6 +211,12 @@ INITIAL_GUESS = (
 REFINE = (
     Option("--optimizer", "refine.optimizer",
            "hybrid: Nelder-Mead over the pyramid, then L-BFGS; or either alone"),
+    Option("--cost", "refine.cost",
+           "the intensity cost: regional (one joint histogram per image region of about "
+           "--region-points points) or nid (one per pair, the paper's)"),
+    Option("--region-points", "refine.region_points",
+           "points of a region of the regional cost (each gets this many to twice this many)",
+           "N"),
     Option("--bins", "refine.bins", "NID histogram bins", "N"),
     Option("--structure-weight", "refine.structure_weight",
            "weight of the depth-edge / image-edge NID beside the intensity NID (0: off)", "W"),
@@ -244,7 +250,7 @@ def _choices(option: Option):
     if option.choices is not None:
         return option.choices
     from nbcalib.matching.config import MATCHER_CHOICES, NORMALIZATIONS, ROTATIONS
-    from nbcalib.registration.config import OPTIMIZERS
+    from nbcalib.registration.config import COSTS, OPTIMIZERS
 
     known = {
         "matching.matcher": MATCHER_CHOICES,
@@ -253,6 +259,7 @@ def _choices(option: Option):
         "matching.rotate_camera": ROTATIONS,
         "matching.rotate_lidar": ROTATIONS,
         "refine.optimizer": OPTIMIZERS,
+        "refine.cost": tuple(COSTS),
     }
     return known.get(option.setting)
 

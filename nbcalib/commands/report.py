@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import argparse
 
+from nbcalib.errors import FAILED_STATUS
+
 DESCRIPTION = """\
 Judge the calibration of a work directory and write WORKDIR/report/index.html: LiDAR points on
 the image (by range and by intensity) before and after refinement, image edges against LiDAR
@@ -24,8 +26,9 @@ examples:
   nbcalib calibrate work/ && nbcalib report work/ --strict || echo "check the result"
 """
 
-#: Exit status of ``--strict`` when the verdict is "suspect".
-SUSPECT_STATUS = 3
+#: Exit status of ``--strict`` when the verdict is "suspect" (a result not to trust, as a
+#: fine registration that failed).
+SUSPECT_STATUS = FAILED_STATUS
 
 
 def add_parser(subparsers, formatter_class=argparse.HelpFormatter) -> argparse.ArgumentParser:

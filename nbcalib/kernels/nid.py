@@ -47,19 +47,62 @@ def _chunk_bounds(n, n_chunks, c):
     return min(n, c * step), min(n, (c + 1) * step)
 
 
-def _joint_hist_hard_impl(model_id, params, T, xyz, point_bins, image_ext, width, height, bins):
-    """Hard-binned joint histogram (int64, bins x bins) of the points' nearest pixels.
+@jit_inline
+def _row_windows(point_bins, n, bins, rows, n_chunks):
+    """Per chunk, the first histogram row its points use and how many (a window of rows).
+
+    With one histogram (``rows == bins``) every chunk's window is all of it. With stacked
+    histograms of groups (``rows = groups * bins``), each chunk needs only the groups its
+    points fall in: a pass over the points' rows finds them (grouped points come sorted by
+    group, so a chunk's window is a few groups). Returns ``(first, span, offset)`` per chunk,
+    ``offset`` the start of the chunk's part in a flat buffer of ``offset[-1]`` rows.
+    """
+    # np.empty and loops, not np.zeros: in a parallel kernel an array expression is a parallel
+    # loop of its own (see _joint_hist_hard_impl)
+    first = np.empty(n_chunks, dtype=np.int64)
+    span = np.empty(n_chunks, dtype=np.int64)
+    offset = np.empty(n_chunks + 1, dtype=np.int64)
+    offset[0] = 0
+    for c in range(n_chunks):
+        lo, hi = _chunk_bounds(n, n_chunks, c)
+        first[c] = 0
+        span[c] = 0
+        if rows == bins:
+            span[c] = bins
+        elif hi > lo:
+            g_lo = rows
+            g_hi = 0
+            for i in range(lo, hi):
+                g = point_bins[i] // bins
+                g_lo = min(g_lo, g)
+                g_hi = max(g_hi, g)
+            first[c] = g_lo * bins
+            span[c] = (g_hi - g_lo + 1) * bins
+        offset[c + 1] = offset[c] + span[c]
+    return first, span, offset
+
+
+def _joint_hist_hard_impl(
+    model_id, params, T, xyz, point_bins, image_ext, width, height, bins, rows
+):
+    """Hard-binned joint histogram (int64, rows x bins) of the points' nearest pixels.
+
+    ``point_bins`` holds each point's histogram *row*, in ``[0, rows)``: its LiDAR bin, or, for
+    ``rows / bins`` stacked histograms of groups of points (:func:`grouped_rows`),
+    ``group * bins + LiDAR bin``; ``bins`` is the number of image bins (the columns).
 
     ``image_ext`` is the row-major image of bins followed by one sentinel pixel of value
     ``bins`` (see :func:`padded_image_bins`). Each chunk handles its points ``BLOCK`` at a time:
     the vectorised :func:`~nbcalib.kernels.projection_batch.nearest_pixels` writes their pixels
     into a buffer that stays in the L1 cache, the points that miss the image pointing at the
     sentinel; then one branch-free loop counts each point in cell ``(a, image_ext[pixel])`` of a
-    ``bins x (bins + 1)`` histogram, whose last column (the misses) is dropped at the end. The
+    ``rows x (bins + 1)`` histogram, whose last column (the misses) is dropped at the end. The
     counts go to four interleaved private histograms, so that consecutive points in one cell do
     not wait for each other's increment. Measured on 1 M points against 1920 x 1080 (serial,
     benchmarks/bench_nid.py): 11 ms for a scalar projection loop, 4.3 ms with the vectorised
-    one and a branching count loop, 3.1 ms like this.
+    one and a branching count loop, 3.1 ms like this. A chunk's private histograms hold only
+    its window of rows (:func:`_row_windows`), so that hundreds of groups cost no more memory
+    than their points touch.
 
     The whole call is one parallel region: nothing is a NumPy array expression outside the
     ``prange`` loop, since numba runs each as a parallel loop of its own, and waking the
@@ -67,10 +110,12 @@ def _joint_hist_hard_impl(model_id, params, T, xyz, point_bins, image_ext, width
     """
     n = xyz.shape[1]
     cols = bins + 1
-    stride = bins * cols
     sentinel = width * height
-    parts = np.empty((N_CHUNKS, stride), dtype=np.int64)
+    first, span, offset = _row_windows(point_bins, n, bins, rows, N_CHUNKS)
+    parts = np.empty(offset[N_CHUNKS] * cols, dtype=np.int64)
     for c in prange(N_CHUNKS):
+        r0 = first[c]
+        stride = span[c] * cols
         counts = np.empty(4 * stride, dtype=np.int32)
         for k in range(4 * stride):
             counts[k] = 0
@@ -94,22 +139,25 @@ def _joint_hist_hard_impl(model_id, params, T, xyz, point_bins, image_ext, width
             m = e - s
             m4 = m - m % 4
             for j in range(0, m4, 4):
-                counts[row[j] * cols + image_ext[pix[j]]] += 1
-                counts[stride + row[j + 1] * cols + image_ext[pix[j + 1]]] += 1
-                counts[2 * stride + row[j + 2] * cols + image_ext[pix[j + 2]]] += 1
-                counts[3 * stride + row[j + 3] * cols + image_ext[pix[j + 3]]] += 1
+                counts[(row[j] - r0) * cols + image_ext[pix[j]]] += 1
+                counts[stride + (row[j + 1] - r0) * cols + image_ext[pix[j + 1]]] += 1
+                counts[2 * stride + (row[j + 2] - r0) * cols + image_ext[pix[j + 2]]] += 1
+                counts[3 * stride + (row[j + 3] - r0) * cols + image_ext[pix[j + 3]]] += 1
             for j in range(m4, m):
-                counts[row[j] * cols + image_ext[pix[j]]] += 1
+                counts[(row[j] - r0) * cols + image_ext[pix[j]]] += 1
+        base = offset[c] * cols
         for k in range(stride):
-            parts[c, k] = counts[k] + counts[stride + k] + counts[2 * stride + k]
-            parts[c, k] += counts[3 * stride + k]
-    hist = np.empty((bins, bins), dtype=np.int64)
-    for a in range(bins):
+            parts[base + k] = counts[k] + counts[stride + k] + counts[2 * stride + k]
+            parts[base + k] += counts[3 * stride + k]
+    hist = np.empty((rows, bins), dtype=np.int64)
+    for a in range(rows):
         for b in range(bins):
-            total = 0
-            for c in range(N_CHUNKS):
-                total += parts[c, a * cols + b]
-            hist[a, b] = total
+            hist[a, b] = 0
+    for c in range(N_CHUNKS):
+        base = offset[c] * cols
+        for a in range(span[c]):
+            for b in range(bins):
+                hist[first[c] + a, b] += parts[base + a * cols + b]
     return hist
 
 
@@ -125,14 +173,18 @@ def padded_image_bins(image_bins, bins):
     return flat
 
 
-def joint_hist_hard(model_id, params, T, xyz, point_bins, image_bins, bins, *, parallel, padded):
-    """Hard-binned joint histogram (int64, bins x bins) of points ``xyz`` (3, N).
+def joint_hist_hard(
+    model_id, params, T, xyz, point_bins, image_bins, bins, *, parallel, padded, groups=1
+):
+    """Hard-binned joint histogram (int64, ``groups * bins`` x bins) of points ``xyz`` (3, N).
 
     ``padded`` is :func:`padded_image_bins` of ``image_bins`` (kept by the caller between calls).
+    With ``groups > 1`` the histogram is ``groups`` stacked ones: ``point_bins`` is then each
+    point's row, ``group * bins + LiDAR bin`` (:func:`grouped_rows`).
     """
     kernel = _joint_hist_hard_parallel if parallel else _joint_hist_hard
     height, width = image_bins.shape
-    return kernel(model_id, params, T, xyz, point_bins, padded, width, height, bins)
+    return kernel(model_id, params, T, xyz, point_bins, padded, width, height, bins, groups * bins)
 
 
 _SIXTH = 1.0 / 6.0
@@ -156,9 +208,13 @@ def _bspline(s):
 
 
 def _joint_hist_smooth_impl(
-    model_id, params, T, xyz, point_bins, image_bins, bins, n_chunks, want_grad
+    model_id, params, T, xyz, point_bins, image_bins, bins, rows, n_chunks, want_grad
 ):
-    """B-spline joint histogram (bins x bins), its derivative (bins x bins x 6) and the count.
+    """B-spline joint histogram (rows x bins), its derivative (rows x bins x 6) and the count.
+
+    ``point_bins`` holds each point's histogram row in ``[0, rows)``: its LiDAR bin (``rows =
+    bins``), or ``group * bins + LiDAR bin`` for ``rows / bins`` stacked histograms of groups
+    of points (:func:`grouped_rows`); ``bins`` is the number of image bins (the columns).
 
     Per point, the image bins of the 4 x 4 patch are gathered first. When they are all equal
     (30-55 % of the points on equalised real images, 1-4 % on noisy synthetic ones), the point
@@ -170,23 +226,27 @@ def _joint_hist_smooth_impl(
     patch's bin range, before updating the cells; 10-25 % slower on the noisy benchmark image
     and on synthetic renders, where branch mispredictions cost more than the saved updates.
     The count of points in the image is kept per chunk in a local variable (one write per
-    chunk, no false sharing between threads).
+    chunk, no false sharing between threads). Each chunk's private histogram holds only its
+    window of rows (:func:`_row_windows`): with hundreds of groups, what its points touch.
     """
     n = xyz.shape[1]
     height, width = image_bins.shape
-    n_grad = n_chunks if want_grad else 1
-    # per-chunk histograms, zeroed by their own chunk: np.zeros here would be a parallel loop
-    # of its own (see _joint_hist_hard_impl)
-    hist = np.empty((n_chunks, bins, bins))
-    dhist = np.empty((n_grad, bins, bins, 6))
+    first, span, offset = _row_windows(point_bins, n, bins, rows, n_chunks)
+    total_rows = offset[n_chunks]
+    # per-chunk histograms in flat buffers, zeroed by their own chunk: np.zeros here would be a
+    # parallel loop of its own (see _joint_hist_hard_impl)
+    hist = np.empty((total_rows, bins))
+    dhist = np.empty((total_rows if want_grad else 1, bins, 6))
     counts = np.empty(n_chunks, dtype=np.int64)
     for c in prange(n_chunks):
-        for a in range(bins):
+        r0 = first[c]
+        base = offset[c]
+        for a in range(base, base + span[c]):
             for b in range(bins):
-                hist[c, a, b] = 0.0
+                hist[a, b] = 0.0
                 if want_grad:
                     for k in range(6):
-                        dhist[c, a, b, k] = 0.0
+                        dhist[a, b, k] = 0.0
         wu = np.empty(4)
         wv = np.empty(4)
         du = np.empty(4)
@@ -226,9 +286,9 @@ def _joint_hist_smooth_impl(
             differ = 0
             for j in range(1, 16):
                 differ |= patch[j] ^ patch[0]
-            a = point_bins[i]
+            a = point_bins[i] - r0 + base  # the point's row in its chunk's part
             if differ == 0:  # one bin under the whole patch: weight 1, derivative 0
-                hist[c, a, patch[0]] += 1.0
+                hist[a, patch[0]] += 1.0
                 continue
             wu[0], wu[1], wu[2], wu[3], du[0], du[1], du[2], du[3] = _bspline(u - ku)
             wv[0], wv[1], wv[2], wv[3], dv[0], dv[1], dv[2], dv[3] = _bspline(v - kv)
@@ -249,31 +309,35 @@ def _joint_hist_smooth_impl(
             for jv in range(4):
                 for ju in range(4):
                     b = patch[4 * jv + ju]
-                    hist[c, a, b] += wu[ju] * wv[jv]
+                    hist[a, b] += wu[ju] * wv[jv]
                     if want_grad:
                         gu = du[ju] * wv[jv]
                         gv = wu[ju] * dv[jv]
                         for k in range(6):
-                            dhist[c, a, b, k] += gu * m[0, k] + gv * m[1, k]
+                            dhist[a, b, k] += gu * m[0, k] + gv * m[1, k]
         counts[c] = count  # one write per chunk: no false sharing between threads
-    out = np.empty((bins, bins))
-    dout = np.empty((bins, bins, 6))
-    for a in range(bins):
+    # the chunks' parts summed in chunk order (the same sums, in the same order, for every
+    # number of threads)
+    out = np.empty((rows, bins))
+    dout = np.empty((rows, bins, 6))
+    for a in range(rows):
         for b in range(bins):
-            total = 0.0
-            for c in range(n_chunks):
-                total += hist[c, a, b]
-            out[a, b] = total
+            out[a, b] = 0.0
             for k in range(6):
-                total = 0.0
-                if want_grad:
-                    for c in range(n_chunks):
-                        total += dhist[c, a, b, k]
-                dout[a, b, k] = total
-    count = 0
+                dout[a, b, k] = 0.0
     for c in range(n_chunks):
-        count += counts[c]
-    return out, dout, count
+        for a in range(span[c]):
+            src = offset[c] + a
+            dst = first[c] + a
+            for b in range(bins):
+                out[dst, b] += hist[src, b]
+                if want_grad:
+                    for k in range(6):
+                        dout[dst, b, k] += dhist[src, b, k]
+    n_in = 0
+    for c in range(n_chunks):
+        n_in += counts[c]
+    return out, dout, n_in
 
 
 _joint_hist_smooth = jit(_joint_hist_smooth_impl)
@@ -351,3 +415,31 @@ def _quantise(values, bins):
             k = bins - 1
         out[i] = k
     return out.reshape(values.shape)
+
+
+@jit
+def _grouped_nid(hist, dhist, bins, weights, want_grad):
+    """Weighted sum of the NIDs of ``weights.size`` stacked histograms, and its gradient.
+
+    ``hist`` (groups * bins, bins) and ``dhist`` (groups * bins, bins, 6) are the stacked
+    histograms of :func:`_joint_hist_smooth_impl` (``dhist`` may have one row when
+    ``want_grad`` is False); group ``g`` is rows ``[g * bins, (g + 1) * bins)``, its NID that of
+    :func:`_nid_from_hist`.
+    """
+    value = 0.0
+    grad = np.zeros(6)
+    empty = np.zeros((bins, bins, 6))
+    for g in range(weights.size):
+        h = hist[g * bins : (g + 1) * bins]
+        d = dhist[g * bins : (g + 1) * bins] if want_grad else empty
+        v, gg = _nid_from_hist(h, d, want_grad)
+        value += weights[g] * v
+        if want_grad:
+            for k in range(6):
+                grad[k] += weights[g] * gg[k]
+    return value, grad
+
+
+def grouped_rows(groups, point_bins, bins):
+    """Histogram row of each point of a grouped histogram: ``group * bins + LiDAR bin`` (int32)."""
+    return (np.asarray(groups, dtype=np.int32) * np.int32(bins) + point_bins).astype(np.int32)

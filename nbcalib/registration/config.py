@@ -11,7 +11,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["OPTIMIZERS", "RENAMED", "RefineConfig"]
+from nbcalib.registration.costs import COSTS
+
+__all__ = ["COSTS", "OPTIMIZERS", "RENAMED", "RefineConfig"]
 
 #: Values of :attr:`RefineConfig.optimizer`.
 OPTIMIZERS = ("hybrid", "lbfgs", "nelder_mead")
@@ -35,6 +37,15 @@ class RefineConfig:
         over the pyramid (reference default: BFGS); ``"nelder_mead"``: Nelder-Mead on the hard
         NID (paper). On the synthetic benchmark the hybrid kept the Nelder-Mead basin and
         robustness and the L-BFGS accuracy (docs/BENCHMARKS.md, "Hybrid optimiser").
+    cost : {"regional", "nid"}
+        The intensity term (:mod:`nbcalib.registration.costs`). ``"regional"`` (default): the
+        mean NID of regions of about ``region_points`` points each, one joint histogram per
+        region (:mod:`~nbcalib.registration.costs.regional`); its minimum stays at the truth
+        where one histogram's walks away (docs/BENCHMARKS.md, section 5.7). ``"nid"``: one
+        joint histogram per pair (the paper and the reference), or per orientation class.
+    region_points : int
+        Points of a region of the regional cost: each has this many to twice this many
+        (2000: about eight per cell of a 16 x 16 histogram).
     bins : int
         Histogram bins per axis (16).
     hidden_point_removal : bool
@@ -77,8 +88,8 @@ class RefineConfig:
         ``max_total_rotation_deg``, which stopped the run once it was outside, and are still
         read from config files and records (:data:`RENAMED`).
     orientation_classes : bool
-        Condition the NID on surface orientation: one joint histogram per class of normal
-        direction, cost = point-weighted mean of the class NIDs
+        With ``cost = "nid"``, condition the NID on surface orientation: one joint histogram
+        per class of normal direction, cost = point-weighted mean of the class NIDs
         (:mod:`nbcalib.registration.orientation`). False: one histogram (paper, reference).
     min_class_points : int
         Visible points every class of a pair needs (about 20 per histogram cell at 16 bins);
@@ -110,6 +121,8 @@ class RefineConfig:
     """
 
     optimizer: str = "hybrid"
+    cost: str = "regional"
+    region_points: int = 2000
     bins: int = 16
     hidden_point_removal: bool = True
     depth_margin: float = 0.1
@@ -168,6 +181,10 @@ class RefineConfig:
             raise ValueError(f"min_sampled_points must be >= 1, got {self.min_sampled_points}")
         if self.points_per_pixel is not None and not self.points_per_pixel > 0:
             raise ValueError(f"points_per_pixel must be > 0 or None, got {self.points_per_pixel}")
+        if self.cost not in COSTS:
+            raise ValueError(f"cost must be one of {', '.join(COSTS)}, got {self.cost!r}")
+        if self.region_points < 1:
+            raise ValueError(f"region_points must be >= 1, got {self.region_points}")
         if self.bins < 2:
             raise ValueError(f"bins must be >= 2, got {self.bins}")
         if self.min_pyramid_size < 16:

@@ -35,7 +35,7 @@ import numpy as np
 from nbcalib.camera import CameraModel
 from nbcalib.kernels import nid as _k
 
-__all__ = ["MultiNIDCost", "NIDCost", "quantise"]
+__all__ = ["GroupedNIDCost", "MultiNIDCost", "NIDCost", "quantise"]
 
 
 def quantise(values, bins: int) -> np.ndarray:
@@ -167,6 +167,7 @@ class NIDCost:
             self.point_bins,
             self.image_bins,
             self.bins,
+            self.bins,
             _k.N_CHUNKS,
             grad,
         )
@@ -179,6 +180,129 @@ class NIDCost:
 
     def value_and_grad(self, T_camera_lidar) -> tuple[float, np.ndarray]:
         """NID and its gradient (6,) w.r.t. ``delta = [v, omega]`` in ``exp(delta) @ T``."""
+        ev = self.evaluate(T_camera_lidar, grad=True)
+        return ev.value, ev.grad
+
+
+class GroupedNIDCost:
+    """The mean of the NIDs of groups of points, each group with a joint histogram of its own.
+
+    ``sum_g w_g NID_g(T)``, ``w_g`` the share of the points in group ``g`` (fixed when the cost
+    is made, not recounted at each pose): the cost of
+    :mod:`nbcalib.registration.costs.regional`, where a group is a region of the image. One
+    kernel call fills every group's histogram (stacked rows, :func:`nbcalib.kernels.nid.
+    grouped_rows`); the points are stored sorted by group, in their given order within it.
+
+    Parameters
+    ----------
+    camera, image, points_lidar, intensities, bins, form, parallel
+        As :class:`NIDCost`.
+    groups : ndarray of shape (N,), int
+        Group of each point (any integers; groups are numbered in sorted order).
+    """
+
+    def __init__(
+        self,
+        camera: CameraModel,
+        image,
+        points_lidar,
+        intensities,
+        groups,
+        *,
+        bins: int = 16,
+        form: str = "smooth",
+        parallel: bool = True,
+    ):
+        if form not in ("smooth", "hard"):
+            raise ValueError(f"form must be 'smooth' or 'hard', got {form!r}")
+        img = _image_to_unit(image)
+        if img.shape != (camera.height, camera.width):
+            raise ValueError(
+                f"image is {img.shape[1]} x {img.shape[0]} but the camera is "
+                f"{camera.width} x {camera.height}"
+            )
+        pts = np.ascontiguousarray(points_lidar, dtype=np.float64)
+        if pts.ndim != 2 or pts.shape[1] != 3:
+            raise ValueError(f"points_lidar must have shape (N, 3), got {pts.shape}")
+        inten = np.ascontiguousarray(intensities, dtype=np.float64).ravel()
+        groups = np.asarray(groups).ravel()
+        if inten.shape[0] != pts.shape[0] or groups.shape[0] != pts.shape[0]:
+            raise ValueError(
+                f"{inten.shape[0]} intensities and {groups.shape[0]} groups for "
+                f"{pts.shape[0]} points"
+            )
+        finite = np.isfinite(pts).all(axis=1) & np.isfinite(inten)
+        _, group_ids = np.unique(groups[finite], return_inverse=True)
+        group_ids = group_ids.ravel()
+        order = np.argsort(group_ids, kind="stable")
+        self.camera = camera
+        self.bins = int(bins)
+        self.form = form
+        self.parallel = bool(parallel)
+        self.xyz = np.ascontiguousarray(pts[finite][order].T)
+        point_bins = quantise(inten[finite][order], self.bins)
+        self.rows = _k.grouped_rows(group_ids[order], point_bins, self.bins)
+        counts = np.bincount(group_ids, minlength=1).astype(np.float64)
+        self.n_groups = counts.size
+        self.weights = counts / max(counts.sum(), 1.0)
+        self.image_bins = quantise(img, self.bins)
+        self._padded = _k.padded_image_bins(self.image_bins, self.bins) if form == "hard" else None
+
+    @property
+    def points(self) -> np.ndarray:
+        """The finite LiDAR points (N, 3), sorted by group (a view of :attr:`xyz`)."""
+        return self.xyz.T
+
+    def __len__(self) -> int:
+        return self.xyz.shape[1]
+
+    def evaluate(self, T_camera_lidar, *, grad: bool = False) -> NIDEvaluation:
+        """The groups' mean NID at ``T_camera_lidar`` (4 x 4), with the gradient if ``grad``."""
+        T = np.ascontiguousarray(T_camera_lidar, dtype=np.float64)
+        if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+            raise ValueError("T_camera_lidar must be a finite 4 x 4 matrix")
+        cam, rows = self.camera, self.n_groups * self.bins
+        if self.form == "hard":
+            if grad:
+                raise ValueError("the hard-binned NID is piecewise constant: it has no gradient")
+            hist = _k.joint_hist_hard(
+                cam.model_id,
+                cam.params,
+                T,
+                self.xyz,
+                self.rows,
+                self.image_bins,
+                self.bins,
+                parallel=self.parallel,
+                padded=self._padded,
+                groups=self.n_groups,
+            ).astype(np.float64)
+            value, _ = _k._grouped_nid(
+                hist, np.zeros((1, self.bins, 6)), self.bins, self.weights, False
+            )
+            return NIDEvaluation(float(value), None, int(hist.sum()))
+        kernel = _k._joint_hist_smooth_parallel if self.parallel else _k._joint_hist_smooth
+        hist, dhist, n_in = kernel(
+            cam.model_id,
+            cam.params,
+            T,
+            self.xyz,
+            self.rows,
+            self.image_bins,
+            self.bins,
+            rows,
+            _k.N_CHUNKS,
+            grad,
+        )
+        value, g = _k._grouped_nid(hist, dhist, self.bins, self.weights, grad)
+        return NIDEvaluation(float(value), g if grad else None, int(n_in))
+
+    def value(self, T_camera_lidar) -> float:
+        """The groups' mean NID at ``T_camera_lidar``."""
+        return self.evaluate(T_camera_lidar).value
+
+    def value_and_grad(self, T_camera_lidar) -> tuple[float, np.ndarray]:
+        """The groups' mean NID and its gradient (6,) w.r.t. ``delta`` in ``exp(delta) @ T``."""
         ev = self.evaluate(T_camera_lidar, grad=True)
         return ev.value, ev.grad
 

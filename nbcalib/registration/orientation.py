@@ -12,7 +12,7 @@ pitch, always the same way (docs/BENCHMARKS.md, "Orientation-conditioned NID").
 Conditioning removes it: the points are split by the dominant axis of their surface normal (in
 the LiDAR frame; three classes, sign ignored), each class gets its own joint histogram, and the
 cost is the point-weighted mean of the class NIDs
-(:func:`nbcalib.registration.refine.build_cost`). Within a class, shading is nearly constant
+(:mod:`nbcalib.registration.costs.nid`). Within a class, shading is nearly constant
 and the histogram compares texture with texture.
 
 Normals come from the principal axes of each point's ``k`` nearest neighbours (SciPy's KD-tree),

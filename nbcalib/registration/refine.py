@@ -49,7 +49,7 @@ from nbcalib.camera import CameraModel, create_camera
 from nbcalib.errors import InputError
 from nbcalib.progress import Progress
 from nbcalib.registration.config import RefineConfig
-from nbcalib.registration.nid import MultiNIDCost, NIDCost
+from nbcalib.registration.costs import build_cost
 from nbcalib.registration.optimize import InnerResult, minimize_lbfgs, minimize_nelder_mead
 from nbcalib.registration.trust import TrustRegion, on_trust_boundary
 from nbcalib.transforms import invert_T, pose_error, validate_T
@@ -320,92 +320,6 @@ def downscale_image(image, level: int, *, equalize: bool = True) -> np.ndarray:
     if not equalize:
         return np.round(blocks * 255.0).astype(np.uint8)
     return equalize_image(blocks)
-
-
-def build_cost(
-    pairs: Sequence[RegistrationPair], T_camera_lidar, config: RefineConfig, *, level: int = 0
-):
-    """The summed NID over the points of each pair visible from ``T_camera_lidar``.
-
-    Visibility is tested with the full-resolution camera; the cost uses pyramid ``level``. With
-    ``config.orientation_classes`` each pair's visible points are split by surface orientation
-    and the pair's term is the point-weighted mean of its class NIDs
-    (:mod:`nbcalib.registration.orientation`); with ``config.structure_weight > 0`` each pair
-    adds that times the NID between its points' depth-edge scores and the image's edge strength
-    (:mod:`nbcalib.registration.structure`); the pairs' terms are summed.
-    """
-    # the hybrid ends with L-BFGS: its result is judged by the smooth form
-    form = "hard" if config.optimizer == "nelder_mead" else "smooth"
-    costs, weights, counts = [], [], []
-    for pair in pairs:
-        camera = downscale_camera(pair.camera, level)
-        image = downscale_image(pair.image, level)
-        # the same budget at every pyramid level: a coarse level's histogram is no cheaper to
-        # fill well, and fewer points there cost accuracy (docs/BENCHMARKS.md, section 10)
-        full = pair.camera
-        budget = (
-            None
-            if config.points_per_pixel is None
-            else max(config.points_per_pixel * full.width * full.height, config.min_sampled_points)
-        )
-        n_visible = 0  # before the subset
-
-        def subset(visible):
-            nonlocal n_visible
-            n_visible = visible.size
-            return pair.sample(visible, budget)  # noqa: B023 (called right here, in this pass)
-
-        # the subset is drawn before the visible points are sorted by pixel: a sort of far
-        # fewer points, and the same result as sampling the sorted ones
-        keep = visible_subset(pair, T_camera_lidar, config, select=subset)
-        counts.append(int(n_visible))
-        groups = (
-            _class_groups(pair, keep, config, scale=n_visible / max(keep.size, 1))
-            if config.orientation_classes
-            else [keep]
-        )
-        for group in groups:
-            costs.append(
-                NIDCost(
-                    camera,
-                    image,
-                    pair.points_lidar[group],
-                    np.asarray(pair.intensities)[group],
-                    bins=config.bins,
-                    form=form,
-                    parallel=config.parallel,
-                )
-            )
-            weights.append(group.size / keep.size if keep.size else 1.0)
-        if config.structure_weight > 0 and keep.size:
-            scores, edges = pair.structure()
-            costs.append(
-                NIDCost(
-                    camera,
-                    downscale_image(edges, level, equalize=False),
-                    pair.points_lidar[keep],
-                    scores[keep],
-                    bins=config.bins,
-                    form=form,
-                    parallel=config.parallel,
-                )
-            )
-            weights.append(config.structure_weight)
-    return MultiNIDCost(costs, weights), counts
-
-
-def _class_groups(pair: RegistrationPair, keep: np.ndarray, config: RefineConfig, scale=1.0):
-    """``keep`` split by orientation class, or whole when a class has under ``min_class_points``.
-
-    All or nothing: a class too small for its own histogram would have to join another and
-    bring its shading along. The groups keep the pixel order of ``keep``. ``scale``: visible
-    points per point of ``keep`` (a subset), so that a subset decides as all of them would.
-    """
-    classes = pair.orientation_classes(keep)
-    sizes = np.bincount(classes, minlength=3)
-    if scale * sizes.min() < config.min_class_points:
-        return [keep]
-    return [keep[classes == c] for c in range(len(sizes))]
 
 
 def refine(

@@ -6,7 +6,7 @@ real sensors (KITTI: NID 0.988 at the reference calibration). Both sensors, howe
 the camera sees an edge there. Levinson and Thrun (RSS 2013) align the two with a product of edge
 strengths; nbcalib compares them with the same NID as the intensities, so that no scale between
 the two terms has to be tuned and the B-spline NID's exact gradient comes for free
-(:func:`nbcalib.registration.refine.build_cost`, ``RefineConfig.structure_weight``).
+(:func:`nbcalib.registration.costs.build_cost`, ``RefineConfig.structure_weight``).
 
 - :func:`depth_edge_scores`: per point, how far its neighbours *along the scan direction* lie
   behind it (``max(r_neighbour - r, 0)``, clipped and square-rooted as Levinson and Thrun). The

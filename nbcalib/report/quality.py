@@ -1,6 +1,6 @@
 """Quality of a calibration: cost landscapes, uncertainty and a verdict, numbers only.
 
-:func:`assess` looks at the summed NID cost (:func:`nbcalib.registration.refine.build_cost`, the
+:func:`assess` looks at the summed NID cost (:func:`nbcalib.registration.costs.build_cost`, the
 smooth B-spline form whatever optimiser produced the result) around a result ``T_camera_lidar``:
 
 **Curves.** The NID along each of the six tangent axes ``delta = [v, omega]`` of the left
@@ -360,7 +360,7 @@ def assess(
         for pair in pairs:
             cost, counts = build_cost([pair], T, rcfg)
             for term in cost.costs:
-                term.parallel = rcfg.parallel and term.xyz.shape[1] >= PARALLEL_MIN_POINTS
+                term.parallel = rcfg.parallel and len(term) >= PARALLEL_MIN_POINTS
             value, grad = cost.value_and_grad(T)
             visible.append(counts[0])
             pixels.append(_pixels_covered(pair, T, rcfg))

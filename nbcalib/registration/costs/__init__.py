@@ -1,0 +1,166 @@
+"""The cost fine registration minimises: chosen by settings, built from terms, in one place.
+
+For each pair the cost looks at the points the camera sees from the pose it is built at (the
+*anchor*: the start of an outer iteration), at most ``points_per_pixel`` of them
+(:class:`PairView`), and sums weighted **terms** over the pairs:
+
+- the **intensity term**, chosen by :attr:`RefineConfig.cost
+  <nbcalib.registration.config.RefineConfig>` (a name of :data:`COSTS`, each one module here):
+
+  - ``"regional"`` (:mod:`~nbcalib.registration.costs.regional`): the image is cut into
+    regions of about ``region_points`` points each at the anchor, one joint histogram per
+    region, the mean of their NIDs;
+  - ``"nid"`` (:mod:`~nbcalib.registration.costs.nid`): one joint histogram per pair (the
+    paper, the reference toolbox), or one per class of surface orientation;
+
+- the **structure term** (:mod:`~nbcalib.registration.costs.structure`), with the weight
+  ``structure_weight`` (0: off): LiDAR depth edges against image edges.
+
+Every term is an object with ``evaluate(T, grad=False)`` returning a
+:class:`~nbcalib.registration.nid.NIDEvaluation`, ``value(T)``, ``value_and_grad(T)``,
+``len()`` (its points) and a settable ``parallel``; :func:`build_cost` returns their weighted
+sum, a :class:`~nbcalib.registration.nid.MultiNIDCost`, and the number of visible points of
+each pair. Fine registration (:mod:`nbcalib.registration.refine`), the quality report
+(:mod:`nbcalib.report.quality`), the warm-up (:mod:`nbcalib.warmup`) and the records in
+``calib.json`` all go through :func:`build_cost`, so a new cost is a module here, a name in
+:data:`COSTS` and its setting, and nothing else changes.
+"""
+
+from __future__ import annotations
+
+import importlib
+from collections.abc import Sequence
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+if TYPE_CHECKING:  # this module is imported by the settings, which must not load numba
+    from nbcalib.camera import CameraModel
+    from nbcalib.registration.config import RefineConfig
+    from nbcalib.registration.nid import MultiNIDCost
+
+__all__ = ["COSTS", "PairView", "build_cost", "pair_view"]
+
+#: The intensity terms by name (:attr:`RefineConfig.cost
+#: <nbcalib.registration.config.RefineConfig>`), each a module of this package whose
+#: ``terms(view, config)`` returns a list of ``(term, weight)`` (weights summing to 1 per pair).
+COSTS = {
+    "regional": "nbcalib.registration.costs.regional",
+    "nid": "nbcalib.registration.costs.nid",
+}
+
+
+@dataclass
+class PairView:
+    """What a term sees of one pair at one pose and pyramid level.
+
+    Attributes
+    ----------
+    pair : RegistrationPair
+        The pair (camera, image, cloud, intensities, and the caches of normals and edges).
+    T_camera_lidar : ndarray of shape (4, 4)
+        The pose the cost is built at (the anchor).
+    keep : ndarray of int64
+        Indices of the points the terms use: visible from the anchor, at most the
+        ``points_per_pixel`` budget, in pixel order.
+    n_visible : int
+        Visible points before the budget.
+    level : int
+        Pyramid level: the terms use ``camera`` and ``image``, the full resolution averaged
+        over ``2^level`` pixel blocks.
+    camera : CameraModel
+    image : ndarray of shape (H, W), uint8
+    form : {"smooth", "hard"}
+        The NID form the optimiser needs (hard: Nelder-Mead; smooth: L-BFGS and the report).
+    """
+
+    pair: object
+    T_camera_lidar: np.ndarray
+    keep: np.ndarray
+    n_visible: int
+    level: int
+    camera: CameraModel
+    image: np.ndarray
+    form: str
+
+    @property
+    def points(self) -> np.ndarray:
+        """The kept points (K, 3), LiDAR frame."""
+        return self.pair.points_lidar[self.keep]
+
+    @property
+    def intensities(self) -> np.ndarray:
+        """Their intensities (K,), in [0, 1]."""
+        return np.asarray(self.pair.intensities)[self.keep]
+
+    def anchor_pixels(self) -> tuple[np.ndarray, np.ndarray]:
+        """Pixels (K, 2) of the kept points at the anchor, full resolution, and their validity."""
+        T = self.T_camera_lidar
+        return self.pair.camera.project(self.points @ T[:3, :3].T + T[:3, 3])
+
+
+def pair_view(pair, T_camera_lidar, config: RefineConfig, *, level: int = 0) -> PairView:
+    """The points of ``pair`` the terms use at ``T_camera_lidar`` (:class:`PairView`)."""
+    from nbcalib.registration.refine import downscale_camera, downscale_image, visible_subset
+
+    full = pair.camera
+    budget = (
+        None
+        if config.points_per_pixel is None
+        else max(config.points_per_pixel * full.width * full.height, config.min_sampled_points)
+    )
+    n_visible = 0  # before the subset
+
+    def subset(visible):
+        nonlocal n_visible
+        n_visible = visible.size
+        return pair.sample(visible, budget)
+
+    # the subset is drawn before the visible points are sorted by pixel: a sort of far fewer
+    # points, and the same result as sampling the sorted ones
+    keep = visible_subset(pair, T_camera_lidar, config, select=subset)
+    return PairView(
+        pair=pair,
+        T_camera_lidar=np.asarray(T_camera_lidar, dtype=np.float64),
+        keep=keep,
+        n_visible=int(n_visible),
+        level=level,
+        camera=downscale_camera(full, level),
+        image=downscale_image(pair.image, level),
+        # the hybrid ends with L-BFGS: its result is judged by the smooth form
+        form="hard" if config.optimizer == "nelder_mead" else "smooth",
+    )
+
+
+def build_cost(
+    pairs: Sequence, T_camera_lidar, config: RefineConfig, *, level: int = 0
+) -> tuple[MultiNIDCost, list[int]]:
+    """The summed cost over ``pairs`` at the points visible from ``T_camera_lidar``.
+
+    Visibility is tested with the full-resolution camera; the terms use pyramid ``level``.
+    Each pair adds its intensity term (:attr:`RefineConfig.cost`, weight 1) and, when
+    ``structure_weight > 0``, its structure term times that weight.
+
+    Returns
+    -------
+    cost : MultiNIDCost
+        The weighted sum of every pair's terms.
+    counts : list of int
+        Visible points of each pair (before the ``points_per_pixel`` subset).
+    """
+    from nbcalib.registration.costs import structure
+    from nbcalib.registration.nid import MultiNIDCost
+
+    intensity = importlib.import_module(COSTS[config.cost]).terms
+    costs, weights, counts = [], [], []
+    for pair in pairs:
+        view = pair_view(pair, T_camera_lidar, config, level=level)
+        counts.append(view.n_visible)
+        terms = intensity(view, config)
+        if config.structure_weight > 0 and view.keep.size:
+            terms += [(t, w * config.structure_weight) for t, w in structure.terms(view, config)]
+        for term, weight in terms:
+            costs.append(term)
+            weights.append(weight)
+    return MultiNIDCost(costs, weights), counts
