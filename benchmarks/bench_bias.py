@@ -416,12 +416,32 @@ def verdicts(syn: dict, real: dict) -> list[str]:
     return lines
 
 
+def cases(args) -> list[tuple[str, str, str, int]]:
+    """(lidar, camera, scene, seed) of every synthetic case asked for."""
+    if args.cases:
+        return [
+            (lidar, camera, scene, int(seed))
+            for lidar, camera, scene, seed in (c.split(":") for c in args.cases.split(","))
+        ]
+    return [
+        (lidar, camera, scene, int(seed))
+        for lidar, camera in (c.split(":") for c in args.combos.split(","))
+        for scene in args.scenes.split(",")
+        for seed in args.seeds.split(",")
+    ]
+
+
 def parse_args(argv=None):
     ap = argparse.ArgumentParser(
         description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter
     )
     ap.add_argument("--parts", default="synthetic,real", help="synthetic, real or both")
     ap.add_argument("--combos", default=",".join(DEFAULT_COMBOS), help="lidar:camera,...")
+    ap.add_argument(
+        "--cases",
+        default="",
+        help="lidar:camera:scene:seed,... instead of every combo x scene x seed",
+    )
     ap.add_argument("--scenes", default="room,street")
     ap.add_argument("--seeds", default="1,2")
     ap.add_argument("--gaps", default="1,0", help="modality gaps (1: default; 0: the control)")
@@ -454,16 +474,11 @@ def main(argv=None) -> int:
         root = args.keep or Path(tmp)
         root.mkdir(parents=True, exist_ok=True)
         if "synthetic" in parts:
-            combos = [c.split(":") for c in args.combos.split(",")]
             variants = [""] + [w for w in args.without.split(",") if w]
-            for lidar, camera in combos:
-                for scene in args.scenes.split(","):
-                    for seed in (int(s) for s in args.seeds.split(",")):
-                        for gap in (float(g) for g in args.gaps.split(",")):
-                            for without in variants if gap == 1 else [""]:
-                                rows += synthetic_case(
-                                    lidar, camera, scene, seed, gap, without, root, args
-                                )
+            for lidar, camera, scene, seed in cases(args):
+                for gap in (float(g) for g in args.gaps.split(",")):
+                    for without in variants if gap == 1 else [""]:
+                        rows += synthetic_case(lidar, camera, scene, seed, gap, without, root, args)
         if "real" in parts:
             if not args.data.is_dir():
                 print(f"real data not found at {args.data}: skipped", file=sys.stderr)
