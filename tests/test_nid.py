@@ -126,7 +126,16 @@ def test_smooth_derivative_matches_reference(model, image_kind, rng):
     expected_d = ref.joint_histogram_smooth_derivative(cam, T, pts, point_bins, image_bins, 8)
     for kernel in (k._joint_hist_smooth, k._joint_hist_smooth_parallel):
         hist, dhist, count = kernel(
-            cam.model_id, cam.params, T, pts.T.copy(), point_bins, image_bins, 8, 8, k.N_CHUNKS, True
+            cam.model_id,
+            cam.params,
+            T,
+            pts.T.copy(),
+            point_bins,
+            image_bins,
+            8,
+            8,
+            k.N_CHUNKS,
+            True,
         )
         assert_allclose(hist, expected, **TOL["kernel_vs_reference"])
         scale = np.abs(expected_d).max()
