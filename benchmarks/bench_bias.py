@@ -44,6 +44,7 @@ import argparse
 import json
 import math
 import platform
+import resource
 import shlex
 import shutil
 import subprocess
@@ -107,15 +108,18 @@ def init_arg(T_camera_lidar: np.ndarray) -> str:
     return "--init=" + ",".join(f"{x:.12g}" for x in values)
 
 
-def calibrate_from(base: Path, scratch: Path, T_start, gt: Path, args) -> dict:
-    """Copy ``base``, calibrate from ``T_start``, evaluate; the run's figures."""
+def _calibrate_once(base: Path, scratch: Path, T_start, gt: Path, options: str) -> dict:
+    """Copy ``base``, calibrate from ``T_start`` with ``options``, evaluate; the run's figures."""
     if scratch.exists():
         shutil.rmtree(scratch)
     shutil.copytree(base, scratch)
+    cpu0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     t0 = time.perf_counter()
-    run = nbcalib("calibrate", scratch, init_arg(T_start), *shlex.split(args.calibrate_args))
+    run = nbcalib("calibrate", scratch, init_arg(T_start), *shlex.split(options))
     seconds = time.perf_counter() - t0
-    row = {"exit": run.returncode, "seconds": round(seconds, 2)}
+    cpu1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (cpu1.ru_utime - cpu0.ru_utime) + (cpu1.ru_stime - cpu0.ru_stime)
+    row = {"exit": run.returncode, "seconds": round(seconds, 2), "cpu_s": round(cpu, 2)}
     if run.returncode != 0:
         lines = (run.stderr or run.stdout).strip().splitlines()
         row["error"] = lines[-1][:300] if lines else ""
@@ -124,6 +128,25 @@ def calibrate_from(base: Path, scratch: Path, T_start, gt: Path, args) -> dict:
     ev = json.loads(checked("evaluate", scratch, "--ground-truth", gt).stdout.splitlines()[-1])
     row["translation_cm"] = 100.0 * ev["translation_error_m"]
     row["rotation_deg"] = ev["rotation_error_deg"]
+    return row
+
+
+_RUNS = [0]
+
+
+def calibrate_from(base: Path, scratch: Path, T_start, gt: Path, args) -> dict:
+    """The run with ``--calibrate-args``; with ``--compare``, the same start with those options
+    too, in alternating order (its figures under ``row["compare"]``)."""
+    if args.compare is None:
+        return _calibrate_once(base, scratch, T_start, gt, args.calibrate_args)
+    _RUNS[0] += 1
+    if _RUNS[0] % 2:
+        row = _calibrate_once(base, scratch, T_start, gt, args.calibrate_args)
+        other = _calibrate_once(base, scratch, T_start, gt, args.compare)
+    else:
+        other = _calibrate_once(base, scratch, T_start, gt, args.compare)
+        row = _calibrate_once(base, scratch, T_start, gt, args.calibrate_args)
+    row["compare"] = other
     return row
 
 
@@ -416,6 +439,54 @@ def verdicts(syn: dict, real: dict) -> list[str]:
     return lines
 
 
+def compare_tables(rows, args) -> dict:
+    """The ``--compare`` runs' tables and verdicts, and the CPU time of one calibrate to the
+    other's, start by start."""
+    other = [{**r, **r["compare"]} for r in rows if "compare" in r]
+    for r in other:
+        if r["part"] == "real" and r["start"] == "near":
+            ok = r["translation_cm"] is not None
+            r["better"] = ok and r["translation_cm"] < 5.0 and r["rotation_deg"] < 1.0
+    print(f"\n## The same starts with calibrate {args.compare or '(defaults)'}")
+    syn = (
+        synthetic_tables([r for r in other if r["part"] == "synthetic"])
+        if any(r["part"] == "synthetic" for r in other)
+        else {}
+    )
+    real = (
+        real_tables([r for r in other if r["part"] == "real"])
+        if any(r["part"] == "real" for r in other)
+        else {}
+    )
+    print("\nTargets (issue 28):")
+    for line in verdicts(syn, real):
+        print(f"- {line}")
+    cpu = np.array([r["cpu_s"] for r in rows if "compare" in r])
+    cpu_other = np.array([r["compare"]["cpu_s"] for r in rows if "compare" in r])
+    wall = np.array([r["seconds"] for r in rows if "compare" in r])
+    wall_other = np.array([r["compare"]["seconds"] for r in rows if "compare" in r])
+    ratio = cpu / cpu_other
+    speed = {
+        "runs": len(cpu),
+        "cpu_s_median": float(np.median(cpu)),
+        "cpu_s_median_compare": float(np.median(cpu_other)),
+        "wall_s_median": float(np.median(wall)),
+        "wall_s_median_compare": float(np.median(wall_other)),
+        "cpu_ratio_of_sums": float(cpu.sum() / cpu_other.sum()),
+        "cpu_ratio_median": float(np.median(ratio)),
+        "cpu_ratio_max": float(np.max(ratio)),
+    }
+    print(
+        f"\nCalibrate CPU s per run (the process and its threads), {speed['runs']} starts: "
+        f"median {speed['cpu_s_median']:.1f} ({args.calibrate_args or 'defaults'}) vs "
+        f"{speed['cpu_s_median_compare']:.1f} ({args.compare or 'defaults'}); ratio of sums "
+        f"{speed['cpu_ratio_of_sums']:.2f}, per start median {speed['cpu_ratio_median']:.2f}, "
+        f"max {speed['cpu_ratio_max']:.2f}; wall median {speed['wall_s_median']:.1f} vs "
+        f"{speed['wall_s_median_compare']:.1f} s"
+    )
+    return {"synthetic": syn, "real": real, "speed": speed}
+
+
 def cases(args) -> list[tuple[str, str, str, int]]:
     """(lidar, camera, scene, seed) of every synthetic case asked for."""
     if args.cases:
@@ -456,6 +527,12 @@ def parse_args(argv=None):
     ap.add_argument("--perturbations", type=int, default=3, help="real starts per set")
     ap.add_argument("--seed", type=int, default=0, help="seed of the real starts")
     ap.add_argument("--calibrate-args", default="", help="options for every calibrate")
+    ap.add_argument(
+        "--compare",
+        default=None,
+        help="options of a second calibrate from every start (e.g. the old cost), run "
+        "alternately with the first: its tables and the CPU-time ratio follow",
+    )
     ap.add_argument("--keep", type=Path, default=None, help="keep and reuse inputs here")
     args = ap.parse_args(argv)
     if args.without == "all":
@@ -505,11 +582,10 @@ def main(argv=None) -> int:
     print("\nTargets (issue 28):")
     for line in verdicts(syn, real):
         print(f"- {line}")
-    print(
-        json.dumps(
-            {"calibrate_args": args.calibrate_args, "synthetic": syn, "real": real, "runs": rows}
-        )
-    )
+    result = {"calibrate_args": args.calibrate_args, "synthetic": syn, "real": real}
+    if args.compare is not None:
+        result["compare"] = compare_tables(rows, args)
+    print(json.dumps({**result, "runs": rows}))
     return 0
 
 

@@ -151,14 +151,30 @@ def main(argv=None) -> int:
         help="comma-separated RefineConfig.points_per_pixel values ('none': every visible point)"
         " run side by side on the same pairs and starts (default: RefineConfig's)",
     )
+    parser.add_argument(
+        "--cost",
+        default=None,
+        help="comma-separated RefineConfig.cost values (nbcalib calibrate --cost) run side by "
+        "side on the same pairs and starts (default: RefineConfig's)",
+    )
     args = parser.parse_args(argv)
     if args.points_per_pixel is None:
-        variants = [RefineConfig().points_per_pixel]
+        ppps = [RefineConfig().points_per_pixel]
     else:
-        variants = [
+        ppps = [
             None if v.strip().lower() == "none" else float(v)
             for v in args.points_per_pixel.split(",")
         ]
+    costs = args.cost.split(",") if args.cost else [RefineConfig().cost]
+    # (label, RefineConfig overrides) of every variant run side by side
+    variants = [
+        (
+            (f"-ppp{v}" if len(ppps) > 1 else "") + (f"-cost{c}" if len(costs) > 1 else ""),
+            {"points_per_pixel": v, "cost": c},
+        )
+        for v in ppps
+        for c in costs
+    ]
     combos, seeds, trials, max_points = COMBOS, range(args.seeds), args.trials, args.max_points
     if args.combos:
         combos = [tuple(c.split(":")) for c in args.combos.split(",")]
@@ -182,13 +198,13 @@ def main(argv=None) -> int:
 
     # 1. accuracy per combination, one pair and three pairs
     side_by_side = len(variants) > 1
-    ppp_head = "points per pixel | " if side_by_side else ""
+    ppp_head = "variant | " if side_by_side else ""
     print(f"| LiDAR x camera | {ppp_head}pairs | runs | median cm | max cm | median deg | max deg |"
           " CPU s |")  # fmt: skip
     print("|---|---|---|---|---|---|---|---|" + ("---|" if side_by_side else ""))
-    all_one = {v: [] for v in variants}
+    all_one = {label: [] for label, _ in variants}
     for lidar, camera in combos:
-        rows = {(v, n): [] for v in variants for n in (1, 3)}
+        rows = {(label, n): [] for label, _ in variants for n in (1, 3)}
         for seed in seeds:
             made = [
                 make_pair(lidar, camera, seed, k, max_points=max_points, image_size=image_size)
@@ -197,31 +213,30 @@ def main(argv=None) -> int:
             T_true = made[0][1]
             rng = np.random.default_rng([seed, 5])
             T_init = perturbed(T_true, rng, rng.uniform(0.05, 0.10), rng.uniform(1.0, 2.0))
-            for v in variants:
+            for label, overrides in variants:
                 for n in (1, 3):
                     pairs = [fresh(m[0]) for m in made[:n]]  # no normals from a run before
-                    cfg = replace(config, points_per_pixel=v)
-                    rows[v, n].append(run_one(pairs, T_true, T_init, cfg))
-        for v in variants:
+                    cfg = replace(config, **overrides)
+                    rows[label, n].append(run_one(pairs, T_true, T_init, cfg))
+        for label, _ in variants:
             for n in (1, 3):
-                s = summary(rows[v, n])
-                key = f"{lidar}-{camera}-{n}" + (f"-ppp{v}" if side_by_side else "")
-                out["accuracy"][key] = s
-                cell = f"{v} | " if side_by_side else ""
+                s = summary(rows[label, n])
+                out["accuracy"][f"{lidar}-{camera}-{n}{label}"] = s
+                cell = f"{label.lstrip('-')} | " if side_by_side else ""
                 print(
                     f"| {lidar} x {camera} | {cell}{n} | {s['n']} | {s['median_cm']:.2f} "
                     f"| {s['max_cm']:.2f} | {s['median_deg']:.3f} | {s['max_deg']:.3f} "
                     f"| {s['cpu_s']:.1f} |",
                     flush=True,
                 )
-            all_one[v] += rows[v, 1]
-    for v in variants:
-        if all_one[v]:
-            one = summary(all_one[v])
-            out["one_pair_all" + (f"-ppp{v}" if side_by_side else "")] = one
+            all_one[label] += rows[label, 1]
+    for label, _ in variants:
+        if all_one[label]:
+            one = summary(all_one[label])
+            out["one_pair_all" + label] = one
             if side_by_side:
                 print(
-                    f"all one-pair runs, points per pixel {v}: {one['median_cm']:.2f} cm / "
+                    f"all one-pair runs, {label.lstrip('-')}: {one['median_cm']:.2f} cm / "
                     f"{one['median_deg']:.3f} deg median, {one['cpu_s']:.1f} CPU s mean"
                 )
             else:
