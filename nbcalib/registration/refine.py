@@ -9,9 +9,10 @@ Each outer iteration
    B-spline NID with its exact gradient, or Nelder-Mead on the hard-binned NID as the paper;
    the default ``optimizer="hybrid"`` runs the whole loop with Nelder-Mead, then again at full
    resolution with L-BFGS from its result);
-   by default each pair's NID is conditioned on surface orientation (one histogram per class
-   of normal direction, :mod:`nbcalib.registration.orientation`), which removes a shading bias
-   of the plain NID;
+   the cost is chosen by ``cost`` in :mod:`nbcalib.registration.costs`: by default the
+   regional NID (one joint histogram per image region of ``region_points`` to twice as many
+   points, the regions cut at the pose each outer iteration starts from); ``"nid"`` is the NID
+   of the whole pair, conditioned on surface orientation when ``orientation_classes``;
 3. stops when the pose moved less than ``converge_translation`` and ``converge_rotation_deg``.
 
 The whole run stays in a trust region around its initial guess (``trust_translation``,
