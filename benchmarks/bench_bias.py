@@ -237,6 +237,12 @@ def _files(folder: Path, calib: Path, points: str) -> list:
     return ["--points", folder / points, "--image", folder / "image.png", "--camera", calib]
 
 
+def better(row) -> bool:
+    """A run from 1 deg / 5 cm ended better in both errors (a failed run did not)."""
+    done = row["translation_cm"] is not None
+    return done and row["translation_cm"] < 5.0 and row["rotation_deg"] < 1.0
+
+
 def real_set(group, name, pre, calib: Path, root: Path, args) -> list[dict]:
     work = root / "real" / name.replace(" ", "_").replace("+", "")
     if not (work / "calib.json").is_file():
@@ -258,10 +264,7 @@ def real_set(group, name, pre, calib: Path, root: Path, args) -> list[dict]:
     for j, (kind, T_start) in enumerate(starts):
         row = calibrate_from(work, root / "scratch", T_start, gt, args)
         row.update(part="real", group=group, set=name, start=kind, direction=j - 1)
-        if kind == "near" and row["translation_cm"] is not None:
-            row["better"] = row["translation_cm"] < 5.0 and row["rotation_deg"] < 1.0
-        else:
-            row["better"] = False if kind == "near" else None
+        row["better"] = better(row) if kind == "near" else None
         rows.append(row)
         print(f"{name} {kind}: {_result(row)}", file=sys.stderr, flush=True)
     return rows
@@ -439,28 +442,27 @@ def verdicts(syn: dict, real: dict) -> list[str]:
     return lines
 
 
+def tables_and_verdicts(rows) -> tuple[dict, dict]:
+    """Print the synthetic and real tables of ``rows`` (each part present) and the verdicts."""
+    syn_rows = [r for r in rows if r["part"] == "synthetic"]
+    real_rows = [r for r in rows if r["part"] == "real"]
+    syn = synthetic_tables(syn_rows) if syn_rows else {}
+    real = real_tables(real_rows) if real_rows else {}
+    print("\nTargets (issue 28):")
+    for line in verdicts(syn, real):
+        print(f"- {line}")
+    return syn, real
+
+
 def compare_tables(rows, args) -> dict:
     """The ``--compare`` runs' tables and verdicts, and the CPU time of one calibrate to the
     other's, start by start."""
     other = [{**r, **r["compare"]} for r in rows if "compare" in r]
     for r in other:
         if r["part"] == "real" and r["start"] == "near":
-            ok = r["translation_cm"] is not None
-            r["better"] = ok and r["translation_cm"] < 5.0 and r["rotation_deg"] < 1.0
+            r["better"] = better(r)
     print(f"\n## The same starts with calibrate {args.compare or '(defaults)'}")
-    syn = (
-        synthetic_tables([r for r in other if r["part"] == "synthetic"])
-        if any(r["part"] == "synthetic" for r in other)
-        else {}
-    )
-    real = (
-        real_tables([r for r in other if r["part"] == "real"])
-        if any(r["part"] == "real" for r in other)
-        else {}
-    )
-    print("\nTargets (issue 28):")
-    for line in verdicts(syn, real):
-        print(f"- {line}")
+    syn, real = tables_and_verdicts(other)
     cpu = np.array([r["cpu_s"] for r in rows if "compare" in r])
     cpu_other = np.array([r["compare"]["cpu_s"] for r in rows if "compare" in r])
     wall = np.array([r["seconds"] for r in rows if "compare" in r])
@@ -569,19 +571,7 @@ def main(argv=None) -> int:
         f"calibrate {args.calibrate_args or '(defaults)'}; {platform.processor() or 'cpu'}; "
         f"{time.perf_counter() - t0:.0f} s"
     )
-    syn = (
-        synthetic_tables([r for r in rows if r["part"] == "synthetic"])
-        if any(r["part"] == "synthetic" for r in rows)
-        else {}
-    )
-    real = (
-        real_tables([r for r in rows if r["part"] == "real"])
-        if any(r["part"] == "real" for r in rows)
-        else {}
-    )
-    print("\nTargets (issue 28):")
-    for line in verdicts(syn, real):
-        print(f"- {line}")
+    syn, real = tables_and_verdicts(rows)
     result = {"calibrate_args": args.calibrate_args, "synthetic": syn, "real": real}
     if args.compare is not None:
         result["compare"] = compare_tables(rows, args)
