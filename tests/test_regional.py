@@ -110,6 +110,28 @@ def test_grouped_cost_is_the_point_weighted_mean_of_group_nids(form, rng):
         assert_allclose(grad, numeric, rtol=2e-3, atol=2e-6)
 
 
+def test_each_group_is_the_groups_own_nid(rng):
+    """each_group: every group's NID and gradient as its own NIDCost; weighted, the cost."""
+    cam = example_camera("pinhole", 200, 150)
+    image, pts, inten = textured_scene(cam, rng, n=4000)
+    T = se3_exp(np.array([0.01, -0.02, 0.0, 0.003, -0.002, 0.001]))
+    groups = rng.integers(0, 5, len(pts)) * 7  # any integers
+    grouped = GroupedNIDCost(cam, image, pts, inten, groups, parallel=False)
+    values, grads = grouped.each_group(T)
+    assert values.shape == (5,) and grads.shape == (5, 6)
+    for j, g in enumerate(np.unique(groups)):
+        sel = groups == g
+        v, gr = NIDCost(cam, image, pts[sel], inten[sel], parallel=False).value_and_grad(T)
+        assert values[j] == pytest.approx(v, rel=1e-12)
+        assert_allclose(grads[j], gr, rtol=1e-9, atol=1e-12)
+    value, grad = grouped.value_and_grad(T)
+    assert grouped.weights @ values == pytest.approx(value, rel=1e-12)
+    assert_allclose(grouped.weights @ grads, grad, rtol=1e-9, atol=1e-12)
+    assert np.array_equal(np.bincount(grouped.group_of_point), np.bincount(groups)[::7])
+    with pytest.raises(ValueError, match="smooth"):
+        GroupedNIDCost(cam, image, pts, inten, groups, form="hard").each_group(T)
+
+
 def test_one_group_is_the_plain_nid_bit_for_bit(rng):
     cam = example_camera("fisheye", 200, 150)
     image, pts, inten = textured_scene(cam, rng, n=3000)

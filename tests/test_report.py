@@ -177,6 +177,61 @@ def test_rejudge_scales_the_intervals(quality_at_truth):
     )
 
 
+def test_jackknife_of_blocks_is_the_spread_of_their_optima():
+    # blocks with the same curvature and their own optima c_b: the summed cost's minimum is their
+    # mean, and the delete-a-block jackknife gives the variance of a mean, s^2 / B (Efron-Stein)
+    from nbcalib.report.quality import _jackknife
+
+    rng = np.random.default_rng(3)
+    B, H0 = 12, np.diag([4e4, 5e4, 3e4, 9e5, 8e5, 7e5])
+    optima = rng.normal(0.0, [0.01, 0.02, 0.01, 1e-3, 2e-3, 1e-3], (B, 6))
+    hess = np.repeat(H0[None], B, axis=0)
+    grads = -(optima - optima.mean(axis=0)) @ H0  # gradients at the summed cost's minimum
+    spans = np.full(6, 1.0)
+    cov = _jackknife(grads, hess, spans)
+    np.testing.assert_allclose(cov, np.cov(optima.T, ddof=1) / B, rtol=1e-9, atol=1e-15)
+    assert _jackknife(grads[:2], hess[:2], spans) is None  # too few blocks to say anything
+
+
+def test_the_pair_test_keeps_its_false_alarm_rate_for_many_pairs():
+    # agreeing pairs: squared Mahalanobis distances chi-square with 6 degrees of freedom. The
+    # chance that any of K pairs is called elsewhere stays below 1 - q for every K
+    from nbcalib.report.quality import pair_disagreement_limit
+
+    rng = np.random.default_rng(4)
+    q = 0.99
+    for k in (2, 5, 15, 40):
+        d2 = rng.chisquare(6, (20000, k))
+        false_alarms = np.mean((d2 > pair_disagreement_limit(q, k)).any(axis=1))
+        assert false_alarms < 1.0 - q + 0.003, (k, false_alarms)
+    assert pair_disagreement_limit(q, 15) > pair_disagreement_limit(q, 2)
+
+
+def test_image_regions_add_their_spread_to_the_uncertainty():
+    many = make_pair(1, n=24000)
+    q = assess([many], np.eye(4))
+    assert len(q.block_pair) >= 3 and set(q.block_pair.tolist()) == {0}
+    # the blocks are the parts of the pair's cost: their gradients sum to its gradient
+    np.testing.assert_allclose(q.block_gradients.sum(axis=0), q.pair_gradients[0], atol=1e-9)
+    assert "jackknife" in q.uncertainty["method"]
+    without = rejudge(q, AssessConfig(jackknife_scale=0.0)).uncertainty
+    assert q.uncertainty["translation_total_cm"] > without["translation_total_cm"]
+    assert q.uncertainty["rotation_total_deg"] > without["rotation_total_deg"]
+
+
+def test_saved_quality_is_judged_again_to_the_same_verdict(tmp_path, quality_at_truth):
+    from nbcalib.report import load_quality
+
+    quality_at_truth.save(tmp_path / "quality.npz")
+    loaded = load_quality(tmp_path / "quality.npz")
+    assert loaded.config == quality_at_truth.config and loaded.names == quality_at_truth.names
+    again = rejudge(loaded, AssessConfig(scale=3.0))
+    before = rejudge(quality_at_truth, AssessConfig(scale=3.0))
+    np.testing.assert_array_equal(again.covariance, before.covariance)
+    assert again.verdict == before.verdict and again.reasons == before.reasons
+    assert again.uncertainty == before.uncertainty
+
+
 class QuadraticCost:
     """A stand-in for an NID cost: ``0.5 delta^T B delta`` of ``delta = log(T)``."""
 
@@ -235,8 +290,8 @@ def test_a_noisy_negative_curvature_at_a_good_result_is_not_a_flat_cost(pair, mo
 
     true_hessian = quality_module._hessian
 
-    def noisy_hessian(cost, T, steps):
-        H = true_hessian(cost, T, steps)
+    def noisy_hessian(cost, T, steps, blocks=None):
+        H = true_hessian(cost, T, steps, blocks)
         w, V = np.linalg.eigh(H)
         return _with_eigenvalue(H, V[:, 0], -0.5 * abs(w[0]))
 
@@ -261,8 +316,8 @@ def test_per_pair_optima_take_no_step_along_re_measured_directions(pair, monkeyp
     true_hessian = quality_module._hessian
     flipped = []
 
-    def noisy_hessian(cost, T, steps):
-        H = true_hessian(cost, T, steps)
+    def noisy_hessian(cost, T, steps, blocks=None):
+        H = true_hessian(cost, T, steps, blocks)
         v = np.linalg.eigh(H)[1][:, 0]
         flipped.append(v)
         return _with_eigenvalue(H, v, -abs(v @ H @ v))
@@ -330,6 +385,9 @@ def test_report_writes_html_figures_and_calib_json(workdir, capsys):
     assert "verdict: ok" in out and "index.html" in out
     folder = workdir.path / "report"
     page = (folder / "index.html").read_text()
+    from nbcalib.report import load_quality
+
+    assert load_quality(folder / "quality.npz").verdict == "ok"  # the material to judge again
     pngs = sorted(p.name for p in folder.glob("*.png"))
     assert pngs == [
         "edges_000000.png",

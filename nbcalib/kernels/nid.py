@@ -440,6 +440,28 @@ def _grouped_nid(hist, dhist, bins, weights, want_grad):
     return value, grad
 
 
+@jit
+def _each_group_nid(hist, dhist, bins, n_groups, want_grad):
+    """Each group's own NID (G,) and gradient (G, 6) from stacked histograms, unweighted.
+
+    The terms that :func:`_grouped_nid` sums: group ``g`` is rows ``[g * bins, (g + 1) *
+    bins)`` of ``hist`` (and of ``dhist`` when ``want_grad``), its NID that of
+    :func:`_nid_from_hist`.
+    """
+    values = np.empty(n_groups)
+    grads = np.zeros((n_groups, 6))
+    empty = np.zeros((bins, bins, 6))
+    for g in range(n_groups):
+        h = hist[g * bins : (g + 1) * bins]
+        d = dhist[g * bins : (g + 1) * bins] if want_grad else empty
+        v, gg = _nid_from_hist(h, d, want_grad)
+        values[g] = v
+        if want_grad:
+            for k in range(6):
+                grads[g, k] = gg[k]
+    return values, grads
+
+
 def grouped_rows(groups, point_bins, bins):
     """Histogram row of each point of a grouped histogram: ``group * bins + LiDAR bin`` (int32)."""
     return (np.asarray(groups, dtype=np.int32) * np.int32(bins) + point_bins).astype(np.int32)

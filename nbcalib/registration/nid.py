@@ -240,6 +240,7 @@ class GroupedNIDCost:
         self.form = form
         self.parallel = bool(parallel)
         self.xyz = np.ascontiguousarray(pts[finite][order].T)
+        self.group_of_point = group_ids[order]  # sorted, 0 .. n_groups - 1
         point_bins = quantise(inten[finite][order], self.bins)
         self.rows = _k.grouped_rows(group_ids[order], point_bins, self.bins)
         counts = np.bincount(group_ids, minlength=1).astype(np.float64)
@@ -296,6 +297,34 @@ class GroupedNIDCost:
         )
         value, g = _k._grouped_nid(hist, dhist, self.bins, self.weights, grad)
         return NIDEvaluation(float(value), g if grad else None, int(n_in))
+
+    def each_group(self, T_camera_lidar) -> tuple[np.ndarray, np.ndarray]:
+        """Each group's own NID (G,) and its gradient (G, 6) at ``T_camera_lidar``, unweighted.
+
+        The smooth form's terms of :meth:`value_and_grad` before the weights
+        (:attr:`weights`) sum them; the quality report's jackknife over regions uses them
+        (:mod:`nbcalib.report.quality`).
+        """
+        if self.form != "smooth":
+            raise ValueError("each_group needs the smooth form (the hard one has no gradient)")
+        T = np.ascontiguousarray(T_camera_lidar, dtype=np.float64)
+        if T.shape != (4, 4) or not np.all(np.isfinite(T)):
+            raise ValueError("T_camera_lidar must be a finite 4 x 4 matrix")
+        cam = self.camera
+        kernel = _k._joint_hist_smooth_parallel if self.parallel else _k._joint_hist_smooth
+        hist, dhist, _ = kernel(
+            cam.model_id,
+            cam.params,
+            T,
+            self.xyz,
+            self.rows,
+            self.image_bins,
+            self.bins,
+            self.n_groups * self.bins,
+            _k.N_CHUNKS,
+            True,
+        )
+        return _k._each_group_nid(hist, dhist, self.bins, self.n_groups, True)
 
     def value(self, T_camera_lidar) -> float:
         """The groups' mean NID at ``T_camera_lidar``."""

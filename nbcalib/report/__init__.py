@@ -15,7 +15,14 @@ from nbcalib._lazy import lazy_exports
 __getattr__, __dir__, __all__ = lazy_exports(
     "nbcalib.report",
     {
-        "quality": ("AXIS_NAMES", "Quality", "assess", "interval_quantiles", "rejudge"),
+        "quality": (
+            "AXIS_NAMES",
+            "Quality",
+            "assess",
+            "interval_quantiles",
+            "load_quality",
+            "rejudge",
+        ),
         "config": ("AssessConfig",),
         "html": ("Report", "make_report", "write_report"),
     },

@@ -50,8 +50,16 @@ class AssessConfig:
     max_nid : float
         A mean per-pair NID above this means image and LiDAR share almost no information.
     pair_disagreement_quantile : float
-        Pairs disagree when a pair's own optimum lies outside this quantile of its own
-        uncertainty (chi-square with 6 degrees of freedom).
+        Pairs disagree when a pair's own optimum lies outside its own uncertainty at the
+        quantile ``1 - (1 - q) / K`` of a chi-square with 6 degrees of freedom (``K`` pairs):
+        with agreeing pairs, the chance that any of them is called elsewhere is below ``1 - q``
+        whatever ``K``.
+    jackknife_blocks : int
+        Blocks of neighbouring image regions per pair for the jackknife part of the
+        uncertainty (:mod:`nbcalib.report.quality`; 0 or 1: none); a pair with fewer regions
+        has fewer blocks.
+    jackknife_scale : float
+        Variance scale of the jackknife part (1: the jackknife as it is).
     """
 
     confidence: float = 0.95
@@ -77,6 +85,8 @@ class AssessConfig:
     max_init_rotation_deg: float = 4.0
     max_nid: float = 0.97
     pair_disagreement_quantile: float = 0.999
+    jackknife_blocks: int = 16
+    jackknife_scale: float = 1.0
 
     def __post_init__(self):
         if not 0.0 < self.confidence < 1.0:
@@ -85,6 +95,10 @@ class AssessConfig:
             raise ValueError("pair_disagreement_quantile must be in (0, 1)")
         if not self.scale > 0.0:
             raise ValueError(f"scale must be > 0, got {self.scale}")
+        if self.jackknife_blocks < 0:
+            raise ValueError(f"jackknife_blocks must be >= 0, got {self.jackknife_blocks}")
+        if not self.jackknife_scale >= 0.0:
+            raise ValueError(f"jackknife_scale must be >= 0, got {self.jackknife_scale}")
         if self.max_curvature_scale < 0:
             raise ValueError(f"max_curvature_scale must be >= 0, got {self.max_curvature_scale}")
         if self.curve_samples < 3 or self.curve_samples % 2 == 0:

@@ -179,6 +179,7 @@ def write_report(
                 figures = _write_figures(
                     tmp, quality, loaded, pairs, refine_config, T, T_init, step
                 )
+            quality.save(tmp / "quality.npz")  # the material to judge it again (rejudge)
             page = _page(quality, work.path, figures, have_mpl, init_stage)
             write_text_atomic(tmp / "index.html", page)  # last: marks the folder complete
             step("index.html")

@@ -67,12 +67,22 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from nbcalib.progress import Progress
+from nbcalib.registration.costs.regional import median_cut_regions
+from nbcalib.registration.nid import GroupedNIDCost
 from nbcalib.registration.refine import RefineConfig, RegistrationPair, build_cost, visible_subset
 from nbcalib.registration.trust import on_trust_boundary
 from nbcalib.report.config import AssessConfig
 from nbcalib.transforms import invert_T, pose_error, se3_exp, validate_T
 
-__all__ = ["AXIS_NAMES", "AssessConfig", "Quality", "assess", "interval_quantiles", "rejudge"]
+__all__ = [
+    "AXIS_NAMES",
+    "AssessConfig",
+    "Quality",
+    "assess",
+    "interval_quantiles",
+    "load_quality",
+    "rejudge",
+]
 
 #: Names of the six tangent axes, in the order of ``delta = [v, omega]`` (camera axes).
 AXIS_NAMES = ("tx", "ty", "tz", "rx", "ry", "rz")
@@ -134,6 +144,14 @@ class Quality:
     pair_hessians_raw : ndarray of shape (K, 6, 6)
         The same Hessians from the gradient differences alone, before that; the per-pair
         optima (Newton steps of the gradient's own quadratic model) use them.
+    block_pair : ndarray of shape (B,), int64
+        The pair of each block of image regions (the jackknife's units, module docstring);
+        empty when no pair's cost has regions (``RefineConfig.cost = "nid"``).
+    block_gradients : ndarray of shape (B, 6)
+        Each block's share of its pair's NID gradient at the result (the blocks of a pair sum
+        to the gradient of its regional term).
+    block_hessians : ndarray of shape (B, 6, 6)
+        Each block's share of its pair's Hessian (central differences of its gradient).
     trust_region : tuple of 2 floats or None
         Fine registration's trust region around the start: metres and degrees.
     start_uncertainty : tuple of 2 floats or None
@@ -165,6 +183,9 @@ class Quality:
         default_factory=lambda: np.zeros(0, dtype=np.int64), repr=False
     )
     pair_hessians_raw: np.ndarray = field(default_factory=lambda: np.zeros((0, 6, 6)), repr=False)
+    block_pair: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64), repr=False)
+    block_gradients: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)), repr=False)
+    block_hessians: np.ndarray = field(default_factory=lambda: np.zeros((0, 6, 6)), repr=False)
     trust_region: tuple[float, float] | None = None
     start_uncertainty: tuple[float, float] | None = None
     move_allowed: tuple[float, float] | None = None
@@ -253,6 +274,47 @@ class Quality:
         if self.pair_offsets is not None:
             out["pair_offsets"] = _finite(self.pair_offsets.tolist())
         return out
+
+    def save(self, path) -> None:
+        """Write everything :func:`rejudge` needs to ``path`` (``.npz``; :func:`load_quality`).
+
+        ``nbcalib report`` writes it as ``report/quality.npz``, so that the uncertainty and the
+        verdict can be judged again under other settings without evaluating a cost.
+        """
+        import io
+        import json
+        from dataclasses import asdict, fields
+
+        from nbcalib.io._files import write_bytes_atomic
+
+        arrays, plain = {}, {}
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if isinstance(value, np.ndarray):
+                arrays[f.name] = value
+            elif f.name == "config":
+                plain[f.name] = asdict(value)
+            else:
+                plain[f.name] = value
+        buffer = io.BytesIO()
+        np.savez_compressed(buffer, _plain=np.array(json.dumps(_finite(plain))), **arrays)
+        write_bytes_atomic(path, [buffer.getvalue()])
+
+
+def load_quality(path) -> Quality:
+    """The :class:`Quality` that :meth:`Quality.save` wrote to ``path``."""
+    import json
+
+    with np.load(path, allow_pickle=False) as data:
+        plain = json.loads(str(data["_plain"]))
+        arrays = {k: data[k] for k in data.files if k != "_plain"}
+    config = AssessConfig(
+        **{k: tuple(v) if isinstance(v, list) else v for k, v in plain.pop("config").items()}
+    )
+    for name in ("init_change", "trust_region", "start_uncertainty", "move_allowed"):
+        if plain.get(name) is not None:
+            plain[name] = tuple(plain[name])
+    return Quality(**plain, **arrays, config=config)
 
 
 #: An uncertainty beyond these says only that the cost does not pin the pose down: no rig's
@@ -357,6 +419,7 @@ def assess(
 
         costs, nids, visible, pixels, grads = [], [], [], [], []
         hessians, raw_hessians, remeasured = [], [], []
+        block_pair, block_grads, block_hessians = [], [], []
         for pair in pairs:
             cost, counts = build_cost([pair], T, rcfg)
             for term in cost.costs:
@@ -366,7 +429,19 @@ def assess(
             pixels.append(_pixels_covered(pair, T, rcfg))
             nids.append(value)
             grads.append(grad)
-            H_raw = _hessian(cost, T, steps) if counts[0] > 0 else np.zeros((6, 6))
+            grouped = [
+                (t, w) for t, w in zip(cost.costs, cost.weights) if isinstance(t, GroupedNIDCost)
+            ]
+            H_raw, whole = np.zeros((6, 6)), None
+            if counts[0] > 0 and grouped:
+                g_b, h_b = _block_material(grouped, T, steps, acfg.jackknife_blocks)
+                block_pair += [len(costs)] * len(g_b)
+                block_grads.append(g_b)
+                block_hessians.append(h_b)
+                if len(grouped) == len(cost.costs):  # the blocks make up the whole cost
+                    whole = h_b
+            if counts[0] > 0:
+                H_raw = _hessian(cost, T, steps, whole)
             H, n_again = H_raw, 0
             if counts[0] > 0:
                 H, n_again = _remeasure_flat_directions(
@@ -404,6 +479,9 @@ def assess(
         pair_hessians=np.array(hessians, dtype=np.float64),
         pair_hessians_raw=np.array(raw_hessians, dtype=np.float64),
         pair_remeasured=np.array(remeasured, dtype=np.int64),
+        block_pair=np.array(block_pair, dtype=np.int64),
+        block_gradients=np.concatenate(block_grads) if block_grads else np.zeros((0, 6)),
+        block_hessians=np.concatenate(block_hessians) if block_hessians else np.zeros((0, 6, 6)),
         trust_region=(rcfg.trust_translation, rcfg.trust_rotation_deg),
         start_uncertainty=start_uncertainty,
     )
@@ -433,10 +511,13 @@ def rejudge(quality: Quality, assess_config: AssessConfig) -> Quality:
     q = replace(quality, config=acfg, reasons=[])
     cov_curvature, n_negative = _inverse_psd(q.hessian)
     covariance = acfg.scale * cov_curvature
+    spans = np.array([acfg.curve_translation] * 3 + [math.radians(acfg.curve_rotation_deg)] * 3)
+    jackknife = _jackknife(q.block_gradients, q.block_hessians, spans)
+    if jackknife is not None:
+        covariance = covariance + acfg.jackknife_scale * jackknife
     pair_mahalanobis = []
     n_pairs = len(q.names)
     if n_pairs >= 2:
-        spans = np.array([acfg.curve_translation] * 3 + [math.radians(acfg.curve_rotation_deg)] * 3)
         offsets = np.empty((n_pairs, 6))
         raw = q.pair_hessians_raw if len(q.pair_hessians_raw) == n_pairs else q.pair_hessians
         for k in range(n_pairs):
@@ -452,14 +533,25 @@ def rejudge(quality: Quality, assess_config: AssessConfig) -> Quality:
             # a good pair disagreeing)
             step = -(_newton_inverse(n * raw[k]) @ (n * q.pair_gradients[k]))
             offsets[k] = np.clip(step, -spans, spans)
-            pair_mahalanobis.append(_mahalanobis2(offsets[k], acfg.scale * h_inv))
+            own = acfg.scale * h_inv
+            mine = q.block_pair == k
+            pair_jackknife = _jackknife(q.block_gradients[mine], q.block_hessians[mine], spans)
+            if pair_jackknife is not None:
+                own = own + acfg.jackknife_scale * pair_jackknife
+            pair_mahalanobis.append(_mahalanobis2(offsets[k], own))
         q.pair_offsets = offsets
-        covariance = covariance + np.cov(offsets.T, ddof=1) / n_pairs
+        if jackknife is None:  # the blocks' spread holds the pairs' when there are blocks
+            covariance = covariance + np.cov(offsets.T, ddof=1) / n_pairs
     q.covariance = covariance
     q.uncertainty = _uncertainty(covariance, acfg.confidence)
     q.uncertainty["method"] = (
         f"curvature of the summed NID, weighted by pixels covered, scale {acfg.scale:.4g}"
-        + (" + spread of per-pair optima" if n_pairs >= 2 else "")
+        + (
+            f" + jackknife over {len(q.block_pair)} blocks of image regions, scale "
+            f"{acfg.jackknife_scale:.4g}"
+            if jackknife is not None
+            else (" + spread of per-pair optima" if n_pairs >= 2 else "")
+        )
     )
     q.move_allowed = _move_allowed(q)
     q.reasons = _reasons(q, n_negative, pair_mahalanobis)
@@ -483,8 +575,15 @@ def _pixels_covered(pair: RegistrationPair, T: np.ndarray, config: RefineConfig)
     return int(np.count_nonzero(hit))
 
 
-def _hessian(cost, T: np.ndarray, steps: np.ndarray) -> np.ndarray:
-    """Symmetric Hessian (6, 6) of ``cost`` w.r.t. ``delta`` by central differences of grads."""
+def _hessian(cost, T: np.ndarray, steps: np.ndarray, blocks=None) -> np.ndarray:
+    """Symmetric Hessian (6, 6) of ``cost`` w.r.t. ``delta`` by central differences of grads.
+
+    ``blocks`` (B, 6, 6): Hessians of parts that sum to ``cost`` (:func:`_block_material`),
+    measured with the same steps; their sum is returned without evaluating ``cost`` again.
+    """
+    if blocks is not None:
+        H = np.sum(blocks, axis=0)
+        return 0.5 * (H + H.T)
     H = np.empty((6, 6))
     for j in range(6):
         d = np.zeros(6)
@@ -493,6 +592,52 @@ def _hessian(cost, T: np.ndarray, steps: np.ndarray) -> np.ndarray:
         _, g_minus = cost.value_and_grad(se3_exp(-d) @ T)
         H[:, j] = (g_plus - g_minus) / (2.0 * steps[j])
     return 0.5 * (H + H.T)
+
+
+def _block_material(grouped, T: np.ndarray, steps: np.ndarray, n_blocks: int):
+    """Gradients (B, 6) and Hessians (B, 6, 6) of blocks of neighbouring image regions.
+
+    ``grouped``: the pair's ``(GroupedNIDCost, weight)`` terms. Each region's weighted gradient
+    at ``T`` and its Hessian by central differences of those gradients (the same steps as
+    :func:`_hessian`, 13 evaluations in all); the regions are then joined into about
+    ``n_blocks`` blocks by median cuts of their pixel centroids
+    (:func:`~nbcalib.registration.costs.regional.median_cut_regions`: neighbours together,
+    since what biases a region biases its neighbours too).
+    """
+    weights, grads, centroids = [], [], []
+    hess = []
+    for term, w in grouped:
+        _, g0 = term.each_group(T)
+        H = np.empty((term.n_groups, 6, 6))
+        for j in range(6):
+            d = np.zeros(6)
+            d[j] = steps[j]
+            _, g_plus = term.each_group(se3_exp(d) @ T)
+            _, g_minus = term.each_group(se3_exp(-d) @ T)
+            H[:, :, j] = (g_plus - g_minus) / (2.0 * steps[j])
+        weights.append(w * term.weights)
+        grads.append(g0)
+        hess.append(H)
+        uv, valid = term.camera.project(term.points @ T[:3, :3].T + T[:3, 3])
+        ok = valid & np.isfinite(uv).all(axis=1)
+        group = term.group_of_point[ok]
+        n = np.maximum(np.bincount(group, minlength=term.n_groups), 1)
+        centroids.append(
+            np.column_stack(
+                [np.bincount(group, uv[ok, c], minlength=term.n_groups) / n for c in (0, 1)]
+            )
+        )
+    weights, grads = np.concatenate(weights), np.concatenate(grads)
+    hess, centroids = np.concatenate(hess), np.concatenate(centroids)
+    n_regions = len(weights)
+    per_block = max(1, -(-n_regions // max(n_blocks, 1)))  # ceil: about n_blocks blocks
+    block = median_cut_regions(centroids, per_block) if n_blocks > 1 else np.zeros(n_regions, int)
+    n = int(block.max()) + 1
+    g_b = np.zeros((n, 6))
+    h_b = np.zeros((n, 6, 6))
+    np.add.at(g_b, block, weights[:, None] * grads)
+    np.add.at(h_b, block, weights[:, None, None] * hess)
+    return g_b, 0.5 * (h_b + h_b.transpose(0, 2, 1))
 
 
 def _remeasure_flat_directions(
@@ -569,6 +714,28 @@ def _newton_inverse(H: np.ndarray, rcond: float = 1e-3) -> np.ndarray:
         return np.zeros_like(H)
     inv_w = np.where(w > rcond * top, 1.0 / np.where(w > 0, w, 1.0), 0.0)
     return (V * inv_w) @ V.T
+
+
+def _jackknife(block_gradients, block_hessians, spans) -> np.ndarray | None:
+    """Delete-a-block jackknife covariance (6, 6) of the cost's minimum; None under 3 blocks.
+
+    The cost is the sum of the blocks' terms; without block ``b`` its minimum lies one Newton
+    step ``-(H - H_b)^+ (g - g_b)`` from the result (``g``, ``H``: the sums; ``^+`` over
+    directions of clear curvature, :func:`_newton_inverse`; each step clipped to ``spans``,
+    the range the curves examine). The covariance is ``(B - 1) / B`` times the steps' summed
+    outer products about their mean (Efron and Stein): how far the minimum moves when a part
+    of the image is left out, which is what a bias that changes over the image does to it.
+    """
+    B = len(block_gradients)
+    if B < 3:
+        return None
+    g, H = block_gradients.sum(axis=0), block_hessians.sum(axis=0)
+    steps = np.empty((B, 6))
+    for b in range(B):
+        step = -(_newton_inverse(H - block_hessians[b]) @ (g - block_gradients[b]))
+        steps[b] = np.clip(step, -spans, spans)
+    d = steps - steps.mean(axis=0)
+    return (B - 1) / B * (d.T @ d)
 
 
 def _mahalanobis2(x: np.ndarray, cov: np.ndarray) -> float:
@@ -665,10 +832,20 @@ def _move_reasons(q: Quality) -> list[str]:
     return reasons
 
 
-def _reasons(q: Quality, n_negative: int, pair_mahalanobis: list[float]) -> list[str]:
-    """One line per reason to distrust the result (empty: ok)."""
+def pair_disagreement_limit(quantile: float, n_pairs: int) -> float:
+    """Squared Mahalanobis distance beyond which one of ``n_pairs`` pairs disagrees.
+
+    The chi-square (6 degrees of freedom) quantile ``1 - (1 - quantile) / n_pairs``: with
+    agreeing pairs the chance that any of them is called elsewhere stays below
+    ``1 - quantile`` however many pairs there are (Bonferroni).
+    """
     from scipy.special import chdtri  # chi2.ppf(q, k) = chdtri(k, 1 - q), without scipy.stats
 
+    return float(chdtri(6, (1.0 - quantile) / max(int(n_pairs), 1)))
+
+
+def _reasons(q: Quality, n_negative: int, pair_mahalanobis: list[float]) -> list[str]:
+    """One line per reason to distrust the result (empty: ok)."""
     c = q.config
     reasons = []
     total_visible = int(q.visible_points.sum())
@@ -724,7 +901,9 @@ def _reasons(q: Quality, n_negative: int, pair_mahalanobis: list[float]) -> list
             )
     reasons += _move_reasons(q)
     if pair_mahalanobis:
-        limit = float(chdtri(6, 1.0 - c.pair_disagreement_quantile))
+        # one test per pair: at 1 - (1 - q) / K each, the chance of a false alarm over all K
+        # pairs stays below 1 - q however many pairs there are (Bonferroni)
+        limit = pair_disagreement_limit(c.pair_disagreement_quantile, len(pair_mahalanobis))
         bad = [name for name, d2 in zip(q.names, pair_mahalanobis) if d2 > limit]
         if bad:
             reasons.append(f"pairs disagree: the optimum of {', '.join(bad)} lies elsewhere")
