@@ -1,0 +1,499 @@
+"""Does the report's word hold? Coverage of its intervals and its verdicts at scale (issue 29).
+
+Every run goes through the command line as a user types it. Two phases, each resumable, so
+that the report can be changed and judged again on the same calibrations:
+
+``--phase calibrate`` makes the calibrations:
+
+- **Synthetic rigs** (modality gap 1, the rig's default): rig ``i`` has seed ``i``, a LiDAR x
+  camera combination (all 35, in a fixed shuffled order, each seed pair ``2k, 2k + 1`` on the
+  same one), a scene (room or street) and 1, 2, 5 or 15 pairs (a fixed cycle). ``nbcalib synth
+  OUT --lidar L --camera C --scene S --pairs N --seed i --format bag1``, then ``nbcalib
+  preprocess OUT/pair_*.bag BASE``. Per rig, starts on copies of BASE: ``truth`` (``nbcalib
+  calibrate COPY --init`` the ground truth), ``near`` (the truth turned by 1-3 deg and moved by
+  5-15 cm in a seeded direction) and, for rigs of one or two pairs, ``auto`` (``nbcalib
+  find-matches COPY``, ``nbcalib initial-guess COPY``, ``nbcalib calibrate COPY``: the automatic
+  guess; a guess refused by its success test is written with ``initial-guess --force`` to know
+  its error, and not calibrated). Even seeds tune, odd seeds check.
+- **Real sets** (``../shared/data/real``, skipped when absent): the 38 sets of
+  benchmarks/bench_bias.py, each preprocessed once; starts ``reference`` (the reference
+  calibration), two ``near`` (1 deg / 5 cm) and one ``far`` (2-3 deg / 10-15 cm); sets alternate
+  between tuning and checking.
+
+``--phase report`` runs ``nbcalib report COPY`` on every calibration (again whenever the
+report's code changes: the stored report is keyed by the commit) and stores the verdict, the
+stated intervals and the error per camera axis.
+
+``--phase analyse`` (the default runs all three) prints the tables: coverage of the stated 95 %
+intervals per axis and of the error norms, per group (single pair, several pairs, camera
+family, real), on the check half; the verdict's confusion table against *good* (within 1 cm /
+0.1 deg synthetic, 0.3 deg / 5 cm real) and *bad* (worse than 1 deg or 10 cm); the guess's
+success test against the paper's 1 deg / 0.5 m.
+
+Run (one at a time on an idle machine; DIR outside the repository, kept between runs):
+
+    python benchmarks/bench_verdict.py --out DIR --rigs 80
+    python benchmarks/bench_verdict.py --out DIR --phase report
+    python benchmarks/bench_verdict.py --out DIR --phase analyse
+"""
+
+from __future__ import annotations
+
+import argparse
+import itertools
+import json
+import shutil
+import subprocess
+import sys
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from bench_bias import init_arg, offset_start, real_sets
+
+from nbcalib.commands.synth import CAMERAS, LIDARS, SCENES
+from nbcalib.io.calib_json import read_ground_truth
+from nbcalib.transforms import invert_T, pose_from_xyz_quat, se3_log
+
+REAL_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
+PAIR_CYCLE = (1, 2, 1, 5, 1, 2, 1, 15)
+#: combinations in a fixed order that puts every LiDAR and camera early
+COMBOS = [
+    c for _, c in sorted(
+        (float(np.random.default_rng([29, k]).random()), c)
+        for k, c in enumerate(itertools.product(LIDARS, CAMERAS))
+    )
+]  # fmt: skip
+
+
+def nbcalib(*args) -> subprocess.CompletedProcess:
+    """``python -m nbcalib ARGS`` as a user types it."""
+    return subprocess.run(
+        [sys.executable, "-m", "nbcalib", *map(str, args)], capture_output=True, text=True
+    )
+
+
+def checked(*args) -> subprocess.CompletedProcess:
+    run = nbcalib(*args)
+    if run.returncode != 0:
+        last = (run.stderr or run.stdout).strip().splitlines()
+        raise RuntimeError(f"nbcalib {args[0]} failed: {last[-1] if last else run.returncode}")
+    return run
+
+
+def evaluate(work: Path, truth: Path, stage: str = "T_lidar_camera") -> dict | None:
+    run = nbcalib("evaluate", work, "--ground-truth", truth, "--stage", stage)
+    if run.returncode != 0:
+        return None
+    return json.loads(run.stdout.strip().splitlines()[-1])
+
+
+@dataclass(frozen=True)
+class Rig:
+    lidar: str
+    camera: str
+    scene: str
+    pairs: int
+    seed: int
+
+    @property
+    def name(self) -> str:
+        return f"{self.lidar}_{self.camera}_{self.scene}_p{self.pairs}_s{self.seed}"
+
+    @property
+    def half(self) -> str:
+        return "tune" if self.seed % 2 == 0 else "check"
+
+
+def rig(i: int) -> Rig:
+    k = i // 2
+    lidar, camera = COMBOS[k % len(COMBOS)]
+    scene = SCENES[int(np.random.default_rng([29, i, 1]).integers(len(SCENES)))]
+    return Rig(lidar, camera, scene, PAIR_CYCLE[k % len(PAIR_CYCLE)], i)
+
+
+def near_start(T_true: np.ndarray, seed, lo_deg=1.0, hi_deg=3.0, lo_m=0.05, hi_m=0.15):
+    rng = np.random.default_rng(seed)
+    return offset_start(T_true, rng.uniform(lo_deg, hi_deg), rng.uniform(lo_m, hi_m), rng)
+
+
+def calibrate_case(case: Path, base: Path, truth: Path, start, meta: dict) -> dict:
+    """Copy ``base`` to ``case/work``, calibrate from ``start`` (a pose or ``"auto"``)."""
+    work = case / "work"
+    if case.exists():
+        shutil.rmtree(case)
+    case.mkdir(parents=True)
+    shutil.copytree(base, work)
+    row = dict(meta)
+    t0 = time.perf_counter()
+    if isinstance(start, str):  # the automatic guess, as `nbcalib run` makes it
+        checked("find-matches", work)
+        guess = nbcalib("initial-guess", work)
+        info = json.loads((work / "calib.json").read_text()).get("nbcalib", {})
+        record = (info.get("initial_guess") or {}).get("init_T_lidar_camera_auto") or {}
+        row["guess_exit"] = guess.returncode
+        row["guess_flagged_ok"] = bool(record.get("success", False))
+        if not record:  # refused, so not written: write it anyway to know its error
+            nbcalib("initial-guess", work, "--force")
+        ev = evaluate(work, truth, "init_T_lidar_camera_auto")
+        row["guess_t_m"] = None if ev is None else ev["translation_error_m"]
+        row["guess_r_deg"] = None if ev is None else ev["rotation_error_deg"]
+        run = nbcalib("calibrate", work) if row["guess_flagged_ok"] else None
+    else:
+        run = nbcalib("calibrate", work, init_arg(start))
+    row["calibrate_exit"] = None if run is None else run.returncode
+    if run is not None and run.returncode != 0:
+        row["calibrate_error"] = (run.stderr.strip().splitlines() or [""])[-1][:300]
+    row["calibrate_s"] = round(time.perf_counter() - t0, 1)
+    (case / "row.json").write_text(json.dumps(row))
+    return row
+
+
+def synthetic_cases(i: int, root: Path):
+    """Yield (case folder, base, truth, start, meta) of rig ``i``, making its data on demand."""
+    r = rig(i)
+    folder = root / "rigs" / r.name
+    base, truth = folder / "base", folder / "synth" / "ground_truth.json"
+
+    def ensure():
+        if (base / "calib.json").is_file() and truth.is_file():
+            return
+        shutil.rmtree(folder, ignore_errors=True)
+        checked("synth", folder / "synth", "--lidar", r.lidar, "--camera", r.camera,
+                "--scene", r.scene, "--pairs", r.pairs, "--seed", r.seed, "--format", "bag1",
+                "-q")  # fmt: skip
+        checked("preprocess", *sorted((folder / "synth").glob("pair_*.bag")), base, "-q")
+        for bag in (folder / "synth").glob("pair_*.bag"):  # the work directory has what it needs
+            bag.unlink()
+
+    meta = dict(part="synthetic", **asdict(r), half=r.half, rig=r.name)
+    starts = ["truth", "near"] + (["auto"] if r.pairs <= 2 else [])
+    for kind in starts:
+        case = root / "cases" / f"{r.name}_{kind}"
+        yield case, ensure, base, truth, kind, {**meta, "start": kind}
+
+
+def real_cases(root: Path, data: Path):
+    for j, (group, name, pre, calib) in enumerate(real_sets(data)):
+        slug = name.replace(" ", "_").replace("+", "")
+        folder = root / "real" / slug
+        base, truth = folder / "base", folder / "reference.json"
+
+        def ensure(pre=pre, base=base, truth=truth, calib=calib, folder=folder):
+            if (base / "calib.json").is_file() and truth.is_file():
+                return
+            shutil.rmtree(folder, ignore_errors=True)
+            folder.mkdir(parents=True)
+            if None in pre:  # positional inputs, then the work directory, then options
+                k = pre.index(None)
+                checked("preprocess", *pre[:k], base, *pre[k + 1 :], "-q")
+            else:
+                checked("preprocess", base, *pre, "-q")
+            T_ref = read_ground_truth(calib)
+            truth.write_text(json.dumps({"T_camera_lidar": T_ref.tolist()}))
+
+        meta = dict(part="real", group=group, set=name, half="tune" if j % 2 == 0 else "check")
+        for kind in ("reference", "near0", "near1", "far"):
+            case = root / "cases" / f"real_{slug}_{kind}"
+            yield case, ensure, base, truth, kind, {**meta, "start": kind}
+
+
+def start_pose(kind: str, truth: Path, case: Path):
+    if kind == "auto":
+        return "auto"
+    T = read_ground_truth(truth)
+    seed = [29, *case.name.encode()]
+    if kind in ("truth", "reference"):
+        return T
+    if kind.startswith("near") and "real_" in case.name:
+        rng = np.random.default_rng(seed)
+        return offset_start(T, 1.0, 0.05, rng)
+    if kind == "far":
+        return near_start(T, seed, 2.0, 3.0, 0.10, 0.15)
+    return near_start(T, seed)
+
+
+def phase_calibrate(args) -> None:
+    root = Path(args.out)
+    synthetic = [list(synthetic_cases(i, root)) for i in range(args.rigs)]
+    real = []
+    if args.real and REAL_DATA.is_dir():
+        real = [list(g) for _, g in itertools.groupby(real_cases(root, REAL_DATA), lambda c: c[2])]
+    elif args.real:
+        print(f"no real data at {REAL_DATA}: real sets skipped", file=sys.stderr)
+    # two synthetic rigs, then one real set, so that any prefix of the work has both
+    order = []
+    for k in range(max(len(synthetic), 2 * len(real))):
+        order += synthetic[k : k + 1] + (real[k // 2 : k // 2 + 1] if k % 2 else [])
+    for case, ensure, base, truth, kind, meta in itertools.chain.from_iterable(order):
+        if (case / "row.json").is_file():
+            continue
+        t0 = time.perf_counter()
+        try:
+            ensure()
+            row = calibrate_case(case, base, truth, start_pose(kind, truth, case), meta)
+        except RuntimeError as exc:
+            print(f"{case.name}: {exc}", file=sys.stderr, flush=True)
+            continue
+        ev = None
+        if row.get("calibrate_exit") == 0:
+            ev = evaluate(case / "work", truth)
+        row["t_m"] = None if ev is None else ev["translation_error_m"]
+        row["r_deg"] = None if ev is None else ev["rotation_error_deg"]
+        (case / "row.json").write_text(json.dumps(row))
+        t, r = row["t_m"], row["r_deg"]
+        print(
+            f"{case.name}: {'-' if t is None else f'{100 * t:.2f} cm / {r:.3f} deg'}"
+            f" ({time.perf_counter() - t0:.0f} s)",
+            flush=True,
+        )
+
+
+# ------------------------------------------------------------------------------ report phase
+
+
+def code_version() -> str:
+    """The commit the report runs at, ``+dirty`` when the work tree has changes."""
+    repo = Path(__file__).resolve().parents[1]
+    head = subprocess.run(["git", "-C", repo, "rev-parse", "--short", "HEAD"],
+                          capture_output=True, text=True).stdout.strip()  # fmt: skip
+    dirty = subprocess.run(["git", "-C", repo, "status", "--porcelain", "nbcalib"],
+                           capture_output=True, text=True).stdout.strip()  # fmt: skip
+    return head + ("+dirty" if dirty else "")
+
+
+def axis_errors(T_est: np.ndarray, T_true: np.ndarray) -> list[float]:
+    """``delta`` with ``exp(delta) @ T_est = T_true``: metres, then radians, camera axes."""
+    return se3_log(T_true @ invert_T(T_est)).tolist()
+
+
+def phase_report(args) -> None:
+    """``nbcalib report`` on every calibration without a report of this code version."""
+    root = Path(args.out)
+    version = code_version()
+    for case in sorted((root / "cases").glob("*")):
+        row_path, out_path = case / "row.json", case / "report.json"
+        if not row_path.is_file():
+            continue
+        row = json.loads(row_path.read_text())
+        if row.get("calibrate_exit") != 0:
+            continue
+        if out_path.is_file() and json.loads(out_path.read_text()).get("version") == version:
+            continue
+        work = case / "work"
+        t0 = time.perf_counter()
+        run = nbcalib("report", work)
+        entry = {"version": version, "exit": run.returncode, "s": time.perf_counter() - t0}
+        if run.returncode == 0:
+            calib = json.loads((work / "calib.json").read_text())
+            quality = calib["nbcalib"]["quality"]
+            truth = read_ground_truth(truth_of(case, row))
+            T_est = invert_T(pose_from_xyz_quat(calib["results"]["T_lidar_camera"]))
+            entry |= {
+                "verdict": quality["verdict"],
+                "reasons": quality["reasons"],
+                "uncertainty": quality["uncertainty"],
+                "delta": axis_errors(T_est, truth),
+            }
+        else:
+            entry["error"] = (run.stderr.strip().splitlines() or [""])[-1][:300]
+        out_path.write_text(json.dumps(entry))
+        print(f"{case.name}: {entry.get('verdict', 'report failed')} ({entry['s']:.0f} s)",
+              flush=True)  # fmt: skip
+
+
+def truth_of(case: Path, row: dict) -> Path:
+    root = case.parents[1]
+    if row["part"] == "synthetic":
+        return root / "rigs" / row["rig"] / "synth" / "ground_truth.json"
+    slug = case.name[len("real_") : -len(row["start"]) - 1]
+    return root / "real" / slug / "reference.json"
+
+
+# ------------------------------------------------------------------------------ analyse phase
+
+FAMILY = {
+    "pinhole": "pinhole",
+    "plumb_bob": "pinhole",
+    "rational_polynomial": "pinhole",
+    "fisheye": "fisheye",
+    "atan": "fisheye",
+    "omnidir": "omni",
+    "equirectangular": "omni",
+}
+
+
+def quality_of(row: dict, report: dict) -> str:
+    """good / middle / bad: the issue's classes of a result's error."""
+    t, r = row["t_m"], row["r_deg"]
+    if t is None:
+        return "none"
+    if r > 1.0 or t > 0.10:
+        return "bad"
+    good = (t <= 0.01 and r <= 0.1) if row["part"] == "synthetic" else (t <= 0.05 and r <= 0.3)
+    return "good" if good else "middle"
+
+
+def groups_of(row: dict) -> list[str]:
+    if row["part"] == "real":
+        return ["real", f"real {row['group']}"]
+    n = "single pair" if row["pairs"] == 1 else "several pairs"
+    return ["synthetic", f"synthetic {n}", f"synthetic {FAMILY[row['camera']]}"]
+
+
+def rejudged(case: Path, report: dict, overrides: dict) -> dict:
+    """The report judged again under ``overrides`` of AssessConfig (tuning, not the CLI path)."""
+    from dataclasses import replace
+
+    from nbcalib.report.quality import load_quality, rejudge
+
+    q = load_quality(case / "work" / "report" / "quality.npz")
+    q = rejudge(q, replace(q.config, **overrides))
+    return {**report, "verdict": q.verdict, "reasons": q.reasons, "uncertainty": q.uncertainty}
+
+
+def load_cases(root: Path, overrides: dict) -> list[dict]:
+    out = []
+    for case in sorted((root / "cases").glob("*")):
+        if not (case / "row.json").is_file():
+            continue
+        row = json.loads((case / "row.json").read_text())
+        report = {}
+        if (case / "report.json").is_file():
+            report = json.loads((case / "report.json").read_text())
+            if overrides and report.get("exit") == 0:
+                report = rejudged(case, report, overrides)
+        row["report"] = report
+        row["class"] = quality_of(row, report)
+        row["case"] = case.name
+        out.append(row)
+    return out
+
+
+def covered(row: dict) -> tuple[list[bool], list[bool]] | None:
+    """Per axis (6) and per norm (2): does the stated 95 % interval hold the error?"""
+    rep = row["report"]
+    if "delta" not in rep:
+        return None
+    u, d = rep["uncertainty"], np.abs(rep["delta"])
+    half = np.r_[np.array(u["translation_cm"]) / 100.0, np.radians(u["rotation_deg"])]
+    axes = (d <= half).tolist()
+    norms = [
+        100.0 * row["t_m"] <= u["translation_total_cm"],
+        row["r_deg"] <= u["rotation_total_deg"],
+    ]
+    return axes, norms
+
+
+def coverage_table(rows: list[dict], half: str) -> list[dict]:
+    table = {}
+    for row in rows:
+        if row["half"] != half:
+            continue
+        c = covered(row)
+        if c is None:
+            continue
+        for g in groups_of(row):
+            t = table.setdefault(g, {"runs": 0, "axes": [], "norms": [], "ok_axes": []})
+            t["runs"] += 1
+            t["axes"] += c[0]
+            t["norms"] += c[1]
+            if row["report"]["verdict"] == "ok":
+                t["ok_axes"] += c[0]
+    return [
+        {"group": g, "runs": t["runs"],
+         "axis_coverage": float(np.mean(t["axes"])),
+         "norm_coverage": float(np.mean(t["norms"])),
+         "ok_axis_coverage": float(np.mean(t["ok_axes"])) if t["ok_axes"] else None}
+        for g, t in sorted(table.items())
+    ]  # fmt: skip
+
+
+def verdict_table(rows: list[dict], half: str) -> dict:
+    """Counts of (part, error class, verdict); a failed calibrate or report is 'failed'."""
+    counts = {}
+    for row in rows:
+        if row["half"] != half or (row.get("start") == "auto" and not row.get("guess_flagged_ok")):
+            continue
+        rep = row["report"]
+        if row.get("calibrate_exit") == 0 and not rep:
+            continue  # not reported yet
+        verdict = rep.get("verdict", "report failed") if rep else "calibrate failed"
+        key = f"{row['part']}|{row['class']}|{verdict}"
+        counts[key] = counts.get(key, 0) + 1
+    return counts
+
+
+def guess_table(rows: list[dict], half: str) -> dict:
+    out = {"guesses": 0, "false_ok": [], "good_refused": 0, "good": 0, "within": 0, "ok": 0}
+    for row in rows:
+        if row.get("start") != "auto" or row["half"] != half or row.get("guess_t_m") is None:
+            continue
+        t, r, ok = row["guess_t_m"], row["guess_r_deg"], row["guess_flagged_ok"]
+        out["guesses"] += 1
+        within = t <= 0.5 and r <= 1.0
+        out["within"] += within
+        out["ok"] += ok
+        if ok and not within:
+            out["false_ok"].append(f"{row['case']} ({100 * t:.1f} cm / {r:.2f} deg)")
+        if t <= 0.1 and r <= 0.5:
+            out["good"] += 1
+            out["good_refused"] += not ok
+    return out
+
+
+def phase_analyse(args) -> None:
+    overrides = {}
+    for item in args.rejudge or []:
+        key, value = item.split("=", 1)
+        overrides[key] = float(value) if "." in value or "e" in value else int(value)
+    rows = load_cases(Path(args.out), overrides)
+    versions = sorted({r["report"].get("version", "-") for r in rows if r["report"]})
+    print(f"{len(rows)} cases, reports of {', '.join(versions) or 'none'}"
+          + (f", rejudged with {overrides} (not the CLI path)" if overrides else ""))  # fmt: skip
+    summary = {"cases": len(rows), "rejudge": overrides}
+    for half in ("tune", "check"):
+        print(f"\n== {half} half ==")
+        cov = coverage_table(rows, half)
+        print(f"{'group':<28}{'runs':>5}{'axes':>8}{'norms':>8}{'axes of ok':>12}")
+        for c in cov:
+            ok = "-" if c["ok_axis_coverage"] is None else f"{100 * c['ok_axis_coverage']:.1f}"
+            print(f"{c['group']:<28}{c['runs']:>5}{100 * c['axis_coverage']:>8.1f}"
+                  f"{100 * c['norm_coverage']:>8.1f}{ok:>12}")  # fmt: skip
+        verdicts = verdict_table(rows, half)
+        print("\nverdicts (part | error class | verdict: count)")
+        for key in sorted(verdicts):
+            print(f"  {key}: {verdicts[key]}")
+        guesses = guess_table(rows, half)
+        print(f"\nguesses: {guesses['guesses']}, within 1 deg / 0.5 m {guesses['within']}, "
+              f"called ok {guesses['ok']}, false ok {len(guesses['false_ok'])} "
+              f"{guesses['false_ok']}, good (0.5 deg / 0.1 m) refused "
+              f"{guesses['good_refused']} of {guesses['good']}")  # fmt: skip
+        summary[half] = {"coverage": cov, "verdicts": verdicts, "guesses": guesses}
+    print(json.dumps(summary))
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    ap.add_argument("--out", required=True, help="folder of the cases (kept, resumable)")
+    ap.add_argument("--rigs", type=int, default=80, help="synthetic rigs (seeds 0 .. N-1)")
+    ap.add_argument("--no-real", dest="real", action="store_false", help="synthetic rigs only")
+    ap.add_argument("--phase", choices=("calibrate", "report", "analyse", "all"), default="all")
+    ap.add_argument("--rejudge", nargs="*", metavar="KEY=VALUE",
+                    help="analyse: judge the stored reports again with AssessConfig settings "
+                    "(tuning; the figures that count come from nbcalib report)")  # fmt: skip
+    args = ap.parse_args(argv)
+    if args.phase in ("calibrate", "all"):
+        phase_calibrate(args)
+    if args.phase in ("report", "all"):
+        phase_report(args)
+    if args.phase in ("analyse", "all"):
+        phase_analyse(args)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
