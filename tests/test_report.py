@@ -52,6 +52,7 @@ def quality_at_truth(pair):
 def test_result_at_the_truth_is_ok_with_finite_uncertainty(quality_at_truth):
     q = quality_at_truth
     assert q.verdict == "ok", q.reasons
+    assert q.next_steps == []
     u = q.uncertainty
     values = [*u["translation_cm"], *u["rotation_deg"], u["translation_total_cm"]]
     values.append(u["rotation_total_deg"])
@@ -78,6 +79,9 @@ def test_far_initial_guess_is_suspect(pair):
     assert q.verdict == "suspect"
     assert any("far apart" in r for r in q.reasons), q.reasons
     assert q.init_change[0] == pytest.approx(np.linalg.norm([0.3, 0.0, 0.1]), rel=0.1)
+    # what to do: start from a measured pose or picked points, said once for its reasons
+    assert any("--manual picks.json" in step for step in q.next_steps), q.next_steps
+    assert len(q.next_steps) == len(set(q.next_steps)) <= len(q.reasons)
 
 
 def test_a_result_on_the_trust_regions_edge_is_suspect(pair):
@@ -136,6 +140,7 @@ def test_mismatched_image_is_suspect(pair, rng):
     q = assess([replace(pair, image=other)], np.eye(4))
     assert q.verdict == "suspect"
     assert any(r.startswith(("flat cost", "image and LiDAR share")) for r in q.reasons), q.reasons
+    assert q.next_steps and all(step.endswith(".") for step in q.next_steps)
 
 
 def test_too_few_points_is_suspect(pair):
@@ -446,6 +451,10 @@ def test_report_flags_a_garbage_result(workdir):
     report = make_report(workdir.path)
     assert report.verdict == "suspect" and report.reasons
     assert "suspect" in report._repr_html_()
+    page = report.html_path.read_text()
+    assert "What to do next" in page and report.quality.next_steps
+    stored = read_calib_json(workdir.calib_path).nbcalib["quality"]
+    assert stored["next_steps"] == report.quality.next_steps
 
 
 @pytest.mark.parametrize(
@@ -475,11 +484,12 @@ def test_report_user_errors_exit_2(workdir, capsys, setup, message):
     assert not (workdir.path / "report").exists()
 
 
-def test_report_strict_exit_status(workdir):
+def test_report_strict_exit_status(workdir, capsys):
     calib = read_calib_json(workdir.calib_path)
     calib.set_T_camera_lidar("T_lidar_camera", se3_exp(np.array([0.07, 0, 0.03, 0, 0.02, 0])))
     workdir.write_calib(calib)
     assert main(["report", str(workdir.path), "--strict"]) == 3  # without --strict: 0 (above)
+    assert "next: " in capsys.readouterr().out  # the printout says what to do
 
 
 def test_an_uncertainty_no_rig_can_have_is_called_unbounded():

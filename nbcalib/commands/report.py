@@ -71,6 +71,7 @@ def print_verdict(report) -> None:
     print(
         f"verdict: {report.verdict}"
         + "".join(f"\n  - {reason}" for reason in report.reasons)
+        + "".join(f"\n  next: {step}" for step in report.quality.next_steps)
         + f"\nuncertainty ({100 * u['confidence']:.0f} %): translation <= "
         f"{format_bound(u['translation_total_cm'], 'cm')}, rotation <= "
         f"{format_bound(u['rotation_total_deg'], 'deg')}"

@@ -283,6 +283,7 @@ def _summary_html(q: Quality) -> str:
     u = q.uncertainty
     conf = 100 * u.get("confidence", 0.95)
     reasons = "".join(f"<li>{html.escape(r)}</li>" for r in q.reasons) or "<li>none</li>"
+    steps = "".join(f"<li>{html.escape(s)}</li>" for s in q.next_steps)
     t = [_axis(x, "cm") for x in u["translation_cm"]]
     r = [_axis(x, "deg") for x in u["rotation_deg"]]
     t_total = format_bound(u["translation_total_cm"], "cm").removesuffix(" cm")
@@ -290,7 +291,8 @@ def _summary_html(q: Quality) -> str:
     return (
         f'<h2>Verdict: <span class="{q.verdict}">{q.verdict}</span></h2>'
         f"<p>Reasons to distrust the result:</p><ul>{reasons}</ul>"
-        f"<h2>Uncertainty ({conf:.0f} %)</h2>"
+        + (f"<p>What to do next:</p><ul>{steps}</ul>" if q.next_steps else "")
+        + f"<h2>Uncertainty ({conf:.0f} %)</h2>"
         "<table><tr><th></th><th>x (right)</th><th>y (down)</th><th>z (forward)</th>"
         "<th>total (norm)</th></tr>"
         f"<tr><th>translation, cm</th><td>&plusmn;{t[0]}</td><td>&plusmn;{t[1]}</td>"

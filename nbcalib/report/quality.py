@@ -134,6 +134,8 @@ class Quality:
     verdict : {"ok", "suspect"}
     reasons : list of str
         Why the result is suspect (empty when ok).
+    next_steps : list of str
+        What to do about them, one line per kind of reason (:data:`ADVICE`; empty when ok).
     pair_gradients : ndarray of shape (K, 6)
         Each pair's NID gradient at the result.
     pair_hessians : ndarray of shape (K, 6, 6)
@@ -191,6 +193,7 @@ class Quality:
     move_allowed: tuple[float, float] | None = None
     verdict: str = "ok"
     reasons: list[str] = field(default_factory=list)
+    next_steps: list[str] = field(default_factory=list)
     config: AssessConfig = field(default_factory=AssessConfig, repr=False)
 
     @property
@@ -223,6 +226,7 @@ class Quality:
         out = {
             "verdict": self.verdict,
             "reasons": list(self.reasons),
+            "next_steps": list(self.next_steps),
             "uncertainty": _finite(self.uncertainty),
             "nid": _finite(self.nid),
             "pairs": [
@@ -508,7 +512,7 @@ def rejudge(quality: Quality, assess_config: AssessConfig) -> Quality:
         ``verdict``, ``reasons`` and ``config`` replaced.
     """
     acfg = assess_config
-    q = replace(quality, config=acfg, reasons=[])
+    q = replace(quality, config=acfg, reasons=[], next_steps=[])
     cov_curvature, n_negative = _inverse_psd(q.hessian)
     covariance = acfg.scale * cov_curvature
     spans = np.array([acfg.curve_translation] * 3 + [math.radians(acfg.curve_rotation_deg)] * 3)
@@ -554,7 +558,9 @@ def rejudge(quality: Quality, assess_config: AssessConfig) -> Quality:
         )
     )
     q.move_allowed = _move_allowed(q)
-    q.reasons = _reasons(q, n_negative, pair_mahalanobis)
+    found = _reasons(q, n_negative, pair_mahalanobis)
+    q.reasons = [line for _, line in found]
+    q.next_steps = list(dict.fromkeys(ADVICE[kind] for kind, _ in found))
     q.verdict = "suspect" if q.reasons else "ok"
     return q
 
@@ -801,7 +807,7 @@ def _move_allowed(q: Quality) -> tuple[float, float] | None:
     )
 
 
-def _move_reasons(q: Quality) -> list[str]:
+def _move_reasons(q: Quality) -> list[tuple[str, str]]:
     """The trust-region and move-from-the-start reasons (module docstring)."""
     if q.init_change is None:
         return []
@@ -810,8 +816,11 @@ def _move_reasons(q: Quality) -> list[str]:
     if q.at_trust_boundary:
         rt, rr = q.trust_region
         reasons.append(
-            f"reached the trust region around the start: moved {dt:.3f} m / {dr:.2f} deg "
-            f"(region {rt:g} m / {rr:g} deg); the optimum may lie beyond it"
+            (
+                "trust_edge",
+                f"reached the trust region around the start: moved {dt:.3f} m / {dr:.2f} deg "
+                f"(region {rt:g} m / {rr:g} deg); the optimum may lie beyond it",
+            )
         )
     if q.move_allowed is not None:
         (at, ar), (stated, source) = q.move_allowed, q.start_uncertainty_used
@@ -825,11 +834,50 @@ def _move_reasons(q: Quality) -> list[str]:
         if moved:
             whose = "stated" if source == "stated" else "none stated: the trust region"
             reasons.append(
-                f"moved {' and '.join(moved)} from the start, more than the "
-                f"{' and '.join(allowed)} the start's ({whose}, {100 * stated[0]:.1f} cm, "
-                f"{stated[1]:.2f} deg) and the result's uncertainties allow"
+                (
+                    "moved_far",
+                    f"moved {' and '.join(moved)} from the start, more than the "
+                    f"{' and '.join(allowed)} the start's ({whose}, {100 * stated[0]:.1f} cm, "
+                    f"{stated[1]:.2f} deg) and the result's uncertainties allow",
+                )
             )
     return reasons
+
+
+#: What to do next, one line per kind of reason (:attr:`Quality.next_steps`).
+ADVICE = {
+    "few_points": (
+        "Few LiDAR points land in the image: check the camera file (model, image size, "
+        "intrinsics) and the start; more scans per pair (--neighbors K) make a denser cloud."
+    ),
+    "no_information": (
+        "Check that each image and its LiDAR data show the same moment and place, then start "
+        "from a measured pose (nbcalib calibrate WORKDIR --force --init X,Y,Z,QX,QY,QZ,QW) or "
+        "from picked points (nbcalib initial-guess WORKDIR --manual picks.json)."
+    ),
+    "flat": (
+        "This view does not pin the pose down: add pairs seen from other places or headings "
+        "(nbcalib run with --pair-count N or a folder of frames) and calibrate them together; "
+        "texture and structure at several depths help."
+    ),
+    "not_at_minimum": (
+        "The optimiser stopped short of the minimum: calibrate again from this result "
+        "(nbcalib calibrate WORKDIR --force --init with results.T_lidar_camera of calib.json)."
+    ),
+    "far_from_guess": (
+        "The start was probably wrong: start from a measured pose (nbcalib calibrate WORKDIR "
+        "--force --init X,Y,Z,QX,QY,QZ,QW) or from picked points (nbcalib initial-guess WORKDIR "
+        "--manual picks.json), then calibrate again."
+    ),
+    "pairs_disagree": (
+        "Look at the named pairs' overlays (a wrong image, a time offset, motion during the "
+        "pair): calibrate without them, or record them again."
+    ),
+    "not_converged": (
+        "Calibrate again with more iterations: nbcalib calibrate WORKDIR --force --max-outer 20."
+    ),
+}
+ADVICE["trust_edge"] = ADVICE["moved_far"] = ADVICE["far_from_guess"]
 
 
 def pair_disagreement_limit(quantile: float, n_pairs: int) -> float:
@@ -844,19 +892,26 @@ def pair_disagreement_limit(quantile: float, n_pairs: int) -> float:
     return float(chdtri(6, (1.0 - quantile) / max(int(n_pairs), 1)))
 
 
-def _reasons(q: Quality, n_negative: int, pair_mahalanobis: list[float]) -> list[str]:
-    """One line per reason to distrust the result (empty: ok)."""
+def _reasons(q: Quality, n_negative: int, pair_mahalanobis: list[float]) -> list[tuple[str, str]]:
+    """``(kind, line)`` per reason to distrust the result (empty: ok); kinds of :data:`ADVICE`."""
     c = q.config
     reasons = []
     total_visible = int(q.visible_points.sum())
     if total_visible < c.min_visible_points:
         reasons.append(
-            f"too few points in view: {total_visible} visible (at least {c.min_visible_points})"
+            (
+                "few_points",
+                f"too few points in view: {total_visible} visible "
+                f"(at least {c.min_visible_points})",
+            )
         )
     if q.nid_per_pair.size and float(np.mean(q.nid_per_pair)) > c.max_nid:
         reasons.append(
-            f"image and LiDAR share almost no information: NID {np.mean(q.nid_per_pair):.3f} "
-            f"(limit {c.max_nid}); wrong image, wrong pose or no texture"
+            (
+                "no_information",
+                f"image and LiDAR share almost no information: NID {np.mean(q.nid_per_pair):.3f} "
+                f"(limit {c.max_nid}); wrong image, wrong pose or no texture",
+            )
         )
     u = q.uncertainty
     flat = []
@@ -879,7 +934,7 @@ def _reasons(q: Quality, n_negative: int, pair_mahalanobis: list[float]) -> list
     if flat_axes:
         flat.append(f"NID hardly rises along {', '.join(flat_axes)}")
     if flat:
-        reasons.append("flat cost: " + "; ".join(flat))
+        reasons.append(("flat", "flat cost: " + "; ".join(flat)))
     off_axes = []
     limits = [c.max_minimum_offset_translation] * 3 + [
         math.radians(c.max_minimum_offset_rotation_deg)
@@ -891,13 +946,18 @@ def _reasons(q: Quality, n_negative: int, pair_mahalanobis: list[float]) -> list
             unit = (100.0, "cm") if a < 3 else (math.degrees(1.0), "deg")
             off_axes.append(f"{AXIS_NAMES[a]} {unit[0] * q.curve_offsets[a, best]:+.2f} {unit[1]}")
     if off_axes:
-        reasons.append("not at a minimum: the NID is lower at " + ", ".join(off_axes))
+        reasons.append(
+            ("not_at_minimum", "not at a minimum: the NID is lower at " + ", ".join(off_axes))
+        )
     if q.init_change is not None:
         dt, dr = q.init_change
         if dt > c.max_init_translation or dr > c.max_init_rotation_deg:
             reasons.append(
-                f"initial guess and result far apart: {100 * dt:.1f} cm, {dr:.2f} deg (limits "
-                f"{100 * c.max_init_translation:.0f} cm, {c.max_init_rotation_deg:.1f} deg)"
+                (
+                    "far_from_guess",
+                    f"initial guess and result far apart: {100 * dt:.1f} cm, {dr:.2f} deg (limits "
+                    f"{100 * c.max_init_translation:.0f} cm, {c.max_init_rotation_deg:.1f} deg)",
+                )
             )
     reasons += _move_reasons(q)
     if pair_mahalanobis:
@@ -906,7 +966,14 @@ def _reasons(q: Quality, n_negative: int, pair_mahalanobis: list[float]) -> list
         limit = pair_disagreement_limit(c.pair_disagreement_quantile, len(pair_mahalanobis))
         bad = [name for name, d2 in zip(q.names, pair_mahalanobis) if d2 > limit]
         if bad:
-            reasons.append(f"pairs disagree: the optimum of {', '.join(bad)} lies elsewhere")
+            reasons.append(
+                (
+                    "pairs_disagree",
+                    f"pairs disagree: the optimum of {', '.join(bad)} lies elsewhere",
+                )
+            )
     if q.converged is False:
-        reasons.append("the optimiser did not converge (stopped at its iteration limit)")
+        reasons.append(
+            ("not_converged", "the optimiser did not converge (stopped at its iteration limit)")
+        )
     return reasons
