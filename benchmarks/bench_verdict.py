@@ -313,6 +313,64 @@ def truth_of(case: Path, row: dict) -> Path:
     return root / "real" / slug / "reference.json"
 
 
+# ------------------------------------------------------------------------------ guess phase
+
+
+def guess_stats(case: Path) -> dict:
+    """The automatic guess made again from the case's stored matches, with its statistics.
+
+    In process (the pipeline's own correspondences and settings), so that a success test can be
+    tuned on the stored guesses without matching again; the guess must equal the stored one.
+    """
+    from nbcalib.config import config_from_record
+    from nbcalib.initial_guess.estimate import estimate_initial_guess, pose_uncertainty
+    from nbcalib.pipeline import Calibrator
+    from nbcalib.workdir import WorkDir
+
+    work = WorkDir(case / "work")
+    calib = work.read_calib()
+    cal = Calibrator(config_from_record(calib.nbcalib.get("config")), workdir=work)
+    corr, _, _ = cal._guess_correspondences()
+    cfg, camera = cal.config.initial_guess, cal._camera()
+    weights = corr.weights if cfg.confidence_weights else None
+    guess = estimate_initial_guess(
+        camera, corr.uv_camera, corr.points_lidar, cfg, seed=cal.config.seed, weights=weights
+    )
+    stored = calib.results.get("init_T_lidar_camera_auto")
+    same = stored is not None and np.allclose(
+        invert_T(pose_from_xyz_quat(stored)), guess.T_camera_lidar, atol=1e-6
+    )
+    inl = guess.inliers
+    t_b, r_b = pose_uncertainty(
+        camera, guess.T_camera_lidar, corr.uv_camera[inl], corr.points_lidar[inl]
+    )
+    return {
+        "same_as_stored": bool(same),
+        "success": bool(guess.success),
+        "inliers": guess.n_inliers,
+        "correspondences": guess.n_correspondences,
+        "rms_px": guess.rms_px,
+        "support": guess.support,
+        "runner_up": guess.runner_up,
+        "runner_up_shared": guess.runner_up_shared,
+        "bound_m": t_b,
+        "bound_deg": r_b,
+    }
+
+
+def phase_guess(args) -> None:
+    for case in sorted((Path(args.out) / "cases").glob("*_auto")):
+        out = case / "guess.json"
+        if out.is_file() or not (case / "row.json").is_file():
+            continue
+        stats = guess_stats(case)
+        out.write_text(json.dumps(stats))
+        row = json.loads((case / "row.json").read_text())
+        print(f"{case.name}: {100 * row['guess_t_m']:.1f} cm / {row['guess_r_deg']:.2f} deg, "
+              f"bound {100 * stats['bound_m']:.1f} cm / {stats['bound_deg']:.2f} deg, "
+              f"ok {stats['success']}", flush=True)  # fmt: skip
+
+
 # ------------------------------------------------------------------------------ analyse phase
 
 FAMILY = {
@@ -481,7 +539,9 @@ def main(argv=None) -> int:
     ap.add_argument("--out", required=True, help="folder of the cases (kept, resumable)")
     ap.add_argument("--rigs", type=int, default=80, help="synthetic rigs (seeds 0 .. N-1)")
     ap.add_argument("--no-real", dest="real", action="store_false", help="synthetic rigs only")
-    ap.add_argument("--phase", choices=("calibrate", "report", "analyse", "all"), default="all")
+    ap.add_argument(
+        "--phase", choices=("calibrate", "report", "guess", "analyse", "all"), default="all"
+    )
     ap.add_argument("--rejudge", nargs="*", metavar="KEY=VALUE",
                     help="analyse: judge the stored reports again with AssessConfig settings "
                     "(tuning; the figures that count come from nbcalib report)")  # fmt: skip
@@ -490,6 +550,8 @@ def main(argv=None) -> int:
         phase_calibrate(args)
     if args.phase in ("report", "all"):
         phase_report(args)
+    if args.phase in ("guess", "all"):
+        phase_guess(args)
     if args.phase in ("analyse", "all"):
         phase_analyse(args)
     return 0

@@ -38,6 +38,7 @@ __getattr__, __dir__, __all__ = lazy_exports(
             "MIN_CORRESPONDENCES",
             "InitialGuess",
             "estimate_initial_guess",
+            "pose_uncertainty",
             "translation_from_bearings",
             "translation_ransac",
         ),

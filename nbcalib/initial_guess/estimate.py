@@ -56,7 +56,12 @@ import numpy as np
 from nbcalib.camera import CameraModel
 from nbcalib.errors import InputError
 from nbcalib.initial_guess.config import INITIAL_TRANSLATIONS, InitialGuessConfig
-from nbcalib.initial_guess.lm import LMResult, refine_pose_lm, reprojection_errors
+from nbcalib.initial_guess.lm import (
+    LMResult,
+    refine_pose_lm,
+    reprojection_errors,
+    reprojection_residuals,
+)
 from nbcalib.initial_guess.ransac import (
     RotationRansacResult,
     estimate_rotation_ransac,
@@ -69,6 +74,7 @@ __all__ = [
     "MIN_CORRESPONDENCES",
     "InitialGuess",
     "estimate_initial_guess",
+    "pose_uncertainty",
     "translation_from_bearings",
     "translation_ransac",
 ]
@@ -195,6 +201,43 @@ class InitialGuess:
             f"final inliers {self.n_inliers} (< {self.threshold:g} px), RMS {rms}, "
             f"{self.distinctiveness:.1f}x the best other rotation: {verdict}"
         )
+
+
+def pose_uncertainty(
+    camera: CameraModel, T_camera_lidar, uv_camera, points_lidar, confidence: float = 0.95
+) -> tuple[float, float]:
+    """Bounds on a pose's error from the reprojections of its inliers, at ``confidence``.
+
+    The least-squares covariance ``s^2 (J^T J)^-1`` of ``delta = [v, omega]`` (the left
+    perturbation of ``T_camera_lidar``; ``|v|`` is the camera centre's displacement), ``J`` the
+    reprojection Jacobian of the given correspondences and ``s^2`` their residuals' variance
+    (``2M - 6`` degrees of freedom); then the ``confidence`` quantiles of ``|v|`` and
+    ``|omega|`` (:func:`nbcalib.report.quality.interval_quantiles`). It sees the noise of the
+    keypoints and how the points' spread over the image and in depth constrains each
+    direction (points on one wall at one depth leave rotation and translation coupled); not
+    matches that are wrong in the same way.
+
+    Returns
+    -------
+    translation : float
+        Metres (inf with fewer than 4 usable correspondences or a singular geometry).
+    rotation : float
+        Degrees.
+    """
+    from nbcalib.report.quality import interval_quantiles
+
+    r, J, valid = reprojection_residuals(camera, T_camera_lidar, uv_camera, points_lidar)
+    ok = valid & np.isfinite(r).all(axis=1) & np.isfinite(J).all(axis=(1, 2))
+    if np.count_nonzero(ok) < 4:
+        return math.inf, math.inf
+    Jm, rm = J[ok].reshape(-1, 6), r[ok].reshape(-1)
+    information = Jm.T @ Jm
+    w = np.linalg.eigvalsh(information)
+    if w[0] <= 1e-12 * max(w[-1], 1e-300):
+        return math.inf, math.inf
+    covariance = float(rm @ rm) / max(rm.size - 6, 1) * np.linalg.inv(information)
+    _, t_bound, r_bound = interval_quantiles(covariance, confidence)
+    return float(t_bound), math.degrees(r_bound)
 
 
 def translation_from_bearings(
