@@ -31,6 +31,17 @@ pairs widen the interval. The
 curvature is used rather than a bootstrap because it costs a dozen gradient evaluations per pair,
 where a bootstrap refits the pose tens of times.
 
+**Uncertainty: what curvature cannot see.** A bias that changes over the image (the camera's
+shading against the LiDAR's falloff) moves the minimum without flattening the cost. The regional
+cost is a sum of one NID per image region, so the same dozen evaluations give every region's
+gradient and Hessian; the regions are joined into about ``jackknife_blocks`` blocks of
+neighbouring regions (median cuts of their pixel centroids) and the delete-a-block jackknife
+(:func:`_jackknife`: one Newton step to the minimum without each block, ``(B - 1) / B`` times
+the steps' scatter) is added to the covariance, times ``jackknife_scale``. It holds the pairs'
+spread too, so it replaces the per-pair term when there are blocks. Pairs disagree when a pair's
+own optimum lies outside its own uncertainty at the chi-square quantile ``1 - (1 - q) / K``
+(:func:`pair_disagreement_limit`), a false-alarm rate that does not grow with ``K``.
+
 **Move from the start.** Fine registration may not leave its trust region around the start
 (:attr:`RefineConfig.trust_translation <nbcalib.registration.config.RefineConfig>`,
 ``trust_rotation_deg``); a result on the region's edge may have been stopped there short of its
@@ -50,7 +61,8 @@ view; a flat cost (an uncertainty above the limits, or a cost that hardly rises 
 a curve whose lowest sample lies clearly away from the result (not at a minimum); a result far
 from the initial guess; a result on the edge of the trust region; a move from the start beyond
 what the start's and the result's uncertainties allow; pairs that disagree; an optimiser that
-did not converge; an NID so high that image and LiDAR share almost no information.
+did not converge; an NID so high that image and LiDAR share almost no information. Each kind of
+reason comes with a line of what to do next (:data:`ADVICE`, :attr:`Quality.next_steps`).
 
 Example
 -------
