@@ -52,7 +52,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_bias import init_arg, offset_start, real_sets
+from bench_bias import init_arg, nbcalib, offset_start, real_sets
 
 from nbcalib.commands.synth import CAMERAS, LIDARS, SCENES
 from nbcalib.io.calib_json import read_ground_truth
@@ -67,13 +67,6 @@ COMBOS = [
         for k, c in enumerate(itertools.product(LIDARS, CAMERAS))
     )
 ]  # fmt: skip
-
-
-def nbcalib(*args) -> subprocess.CompletedProcess:
-    """``python -m nbcalib ARGS`` as a user types it."""
-    return subprocess.run(
-        [sys.executable, "-m", "nbcalib", *map(str, args)], capture_output=True, text=True
-    )
 
 
 def checked(*args) -> subprocess.CompletedProcess:

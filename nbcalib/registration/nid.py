@@ -262,8 +262,8 @@ class GroupedNIDCost:
         T = np.ascontiguousarray(T_camera_lidar, dtype=np.float64)
         if T.shape != (4, 4) or not np.all(np.isfinite(T)):
             raise ValueError("T_camera_lidar must be a finite 4 x 4 matrix")
-        cam, rows = self.camera, self.n_groups * self.bins
         if self.form == "hard":
+            cam = self.camera
             if grad:
                 raise ValueError("the hard-binned NID is piecewise constant: it has no gradient")
             hist = _k.joint_hist_hard(
@@ -282,8 +282,15 @@ class GroupedNIDCost:
                 hist, np.zeros((1, self.bins, 6)), self.bins, self.weights, False
             )
             return NIDEvaluation(float(value), None, int(hist.sum()))
+        hist, dhist, n_in = self._smooth_histograms(T, grad)
+        value, g = _k._grouped_nid(hist, dhist, self.bins, self.weights, grad)
+        return NIDEvaluation(float(value), g if grad else None, int(n_in))
+
+    def _smooth_histograms(self, T: np.ndarray, grad: bool):
+        """The stacked B-spline joint histograms (and their derivatives if ``grad``) at ``T``."""
+        cam = self.camera
         kernel = _k._joint_hist_smooth_parallel if self.parallel else _k._joint_hist_smooth
-        hist, dhist, n_in = kernel(
+        return kernel(
             cam.model_id,
             cam.params,
             T,
@@ -291,12 +298,10 @@ class GroupedNIDCost:
             self.rows,
             self.image_bins,
             self.bins,
-            rows,
+            self.n_groups * self.bins,
             _k.N_CHUNKS,
             grad,
         )
-        value, g = _k._grouped_nid(hist, dhist, self.bins, self.weights, grad)
-        return NIDEvaluation(float(value), g if grad else None, int(n_in))
 
     def each_group(self, T_camera_lidar) -> tuple[np.ndarray, np.ndarray]:
         """Each group's own NID (G,) and its gradient (G, 6) at ``T_camera_lidar``, unweighted.
@@ -310,20 +315,7 @@ class GroupedNIDCost:
         T = np.ascontiguousarray(T_camera_lidar, dtype=np.float64)
         if T.shape != (4, 4) or not np.all(np.isfinite(T)):
             raise ValueError("T_camera_lidar must be a finite 4 x 4 matrix")
-        cam = self.camera
-        kernel = _k._joint_hist_smooth_parallel if self.parallel else _k._joint_hist_smooth
-        hist, dhist, _ = kernel(
-            cam.model_id,
-            cam.params,
-            T,
-            self.xyz,
-            self.rows,
-            self.image_bins,
-            self.bins,
-            self.n_groups * self.bins,
-            _k.N_CHUNKS,
-            True,
-        )
+        hist, dhist, _ = self._smooth_histograms(T, True)
         return _k._each_group_nid(hist, dhist, self.bins, self.n_groups, True)
 
     def value(self, T_camera_lidar) -> float:

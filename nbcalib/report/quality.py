@@ -72,9 +72,11 @@ Example
 
 from __future__ import annotations
 
+import io
+import json
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, fields, replace
 
 import numpy as np
 
@@ -297,10 +299,6 @@ class Quality:
         ``nbcalib report`` writes it as ``report/quality.npz``, so that the uncertainty and the
         verdict can be judged again under other settings without evaluating a cost.
         """
-        import io
-        import json
-        from dataclasses import asdict, fields
-
         from nbcalib.io._files import write_bytes_atomic
 
         arrays, plain = {}, {}
@@ -319,8 +317,6 @@ class Quality:
 
 def load_quality(path) -> Quality:
     """The :class:`Quality` that :meth:`Quality.save` wrote to ``path``."""
-    import json
-
     with np.load(path, allow_pickle=False) as data:
         plain = json.loads(str(data["_plain"]))
         arrays = {k: data[k] for k in data.files if k != "_plain"}
