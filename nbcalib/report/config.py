@@ -54,6 +54,11 @@ class AssessConfig:
         quantile ``1 - (1 - q) / K`` of a chi-square with 6 degrees of freedom (``K`` pairs):
         with agreeing pairs, the chance that any of them is called elsewhere is below ``1 - q``
         whatever ``K``.
+    pair_bias_translation, pair_bias_rotation_deg : float
+        Standard deviation per axis of a pair's own single-shot bias (the part of its optimum
+        that another pair of the same rig does not share), the least the pair test allows
+        for; with three or more pairs the spread of the other pairs' optima raises it
+        (:mod:`nbcalib.report.quality`).
     jackknife_blocks : int
         Blocks of neighbouring image regions per pair for the jackknife part of the
         uncertainty (:mod:`nbcalib.report.quality`; 0 or 1: none); a pair with fewer regions
@@ -85,6 +90,11 @@ class AssessConfig:
     max_init_rotation_deg: float = 4.0
     max_nid: float = 0.97
     pair_disagreement_quantile: float = 0.999
+    # the median over axes and rigs of the pairs' scatter (standard deviation of their own
+    # optima per axis) on bench_verdict's tune rigs of 2 and 5 pairs: 0.27 cm / 0.045 deg
+    # (docs/BENCHMARKS.md 11)
+    pair_bias_translation: float = 0.003
+    pair_bias_rotation_deg: float = 0.05
     jackknife_blocks: int = 16
     jackknife_scale: float = 1.0
 
@@ -95,6 +105,8 @@ class AssessConfig:
             raise ValueError("pair_disagreement_quantile must be in (0, 1)")
         if not self.scale > 0.0:
             raise ValueError(f"scale must be > 0, got {self.scale}")
+        if not (self.pair_bias_translation >= 0.0 and self.pair_bias_rotation_deg >= 0.0):
+            raise ValueError("pair_bias_translation and pair_bias_rotation_deg must be >= 0")
         if self.jackknife_blocks < 0:
             raise ValueError(f"jackknife_blocks must be >= 0, got {self.jackknife_blocks}")
         if not self.jackknife_scale >= 0.0:

@@ -39,8 +39,9 @@ neighbouring regions (median cuts of their pixel centroids) and the delete-a-blo
 (:func:`_jackknife`: one Newton step to the minimum without each block, ``(B - 1) / B`` times
 the steps' scatter) is added to the covariance, times ``jackknife_scale``. It holds the pairs'
 spread too, so it replaces the per-pair term when there are blocks. Pairs disagree when a pair's
-own optimum lies outside its own uncertainty at the chi-square quantile ``1 - (1 - q) / K``
-(:func:`pair_disagreement_limit`), a false-alarm rate that does not grow with ``K``.
+own optimum lies farther from the other pairs' than its and their uncertainties and the bias of
+a single shot allow (:func:`pairs_elsewhere`: the bias from a floor, or from the other pairs'
+spread when there are three or more), a false-alarm rate that does not grow with ``K``.
 
 **Move from the start.** Fine registration may not leave its trust region around the start
 (:attr:`RefineConfig.trust_translation <nbcalib.registration.config.RefineConfig>`,
@@ -527,10 +528,10 @@ def rejudge(quality: Quality, assess_config: AssessConfig) -> Quality:
     jackknife = _jackknife(q.block_gradients, q.block_hessians, spans)
     if jackknife is not None:
         covariance = covariance + acfg.jackknife_scale * jackknife
-    pair_mahalanobis = []
+    pair_ratios = []
     n_pairs = len(q.names)
     if n_pairs >= 2:
-        offsets = np.empty((n_pairs, 6))
+        offsets, owns = np.empty((n_pairs, 6)), np.empty((n_pairs, 6, 6))
         raw = q.pair_hessians_raw if len(q.pair_hessians_raw) == n_pairs else q.pair_hessians
         for k in range(n_pairs):
             n = float(q.pixels_covered[k])
@@ -545,12 +546,15 @@ def rejudge(quality: Quality, assess_config: AssessConfig) -> Quality:
             # a good pair disagreeing)
             step = -(_newton_inverse(n * raw[k]) @ (n * q.pair_gradients[k]))
             offsets[k] = np.clip(step, -spans, spans)
-            own = acfg.scale * h_inv
+            owns[k] = acfg.scale * h_inv
             mine = q.block_pair == k
             pair_jackknife = _jackknife(q.block_gradients[mine], q.block_hessians[mine], spans)
             if pair_jackknife is not None:
-                own = own + acfg.jackknife_scale * pair_jackknife
-            pair_mahalanobis.append(_mahalanobis2(offsets[k], own))
+                owns[k] += acfg.jackknife_scale * pair_jackknife
+        floor = np.array(
+            [acfg.pair_bias_translation] * 3 + [math.radians(acfg.pair_bias_rotation_deg)] * 3
+        )
+        pair_ratios = pairs_elsewhere(offsets, owns, floor, acfg.pair_disagreement_quantile)
         q.pair_offsets = offsets
         if jackknife is None:  # the blocks' spread holds the pairs' when there are blocks
             covariance = covariance + np.cov(offsets.T, ddof=1) / n_pairs
@@ -566,7 +570,7 @@ def rejudge(quality: Quality, assess_config: AssessConfig) -> Quality:
         )
     )
     q.move_allowed = _move_allowed(q)
-    found = _reasons(q, n_negative, pair_mahalanobis)
+    found = _reasons(q, n_negative, pair_ratios)
     q.reasons = [line for _, line in found]
     q.next_steps = list(dict.fromkeys(ADVICE[kind] for kind, _ in found))
     q.verdict = "suspect" if q.reasons else "ok"
@@ -752,11 +756,6 @@ def _jackknife(block_gradients, block_hessians, spans) -> np.ndarray | None:
     return (B - 1) / B * (d.T @ d)
 
 
-def _mahalanobis2(x: np.ndarray, cov: np.ndarray) -> float:
-    inv, _ = _inverse_psd(cov)
-    return float(x @ inv @ x)
-
-
 def interval_quantiles(
     covariance: np.ndarray, confidence: float
 ) -> tuple[np.ndarray, float, float]:
@@ -888,19 +887,73 @@ ADVICE = {
 ADVICE["trust_edge"] = ADVICE["moved_far"] = ADVICE["far_from_guess"]
 
 
-def pair_disagreement_limit(quantile: float, n_pairs: int) -> float:
-    """Squared Mahalanobis distance beyond which one of ``n_pairs`` pairs disagrees.
+def pairs_elsewhere(offsets, own_covariances, bias_floor, quantile: float) -> list[float]:
+    """How far each pair's optimum lies from the other pairs', in units of its test's limit.
 
-    The chi-square (6 degrees of freedom) quantile ``1 - (1 - quantile) / n_pairs``: with
-    agreeing pairs the chance that any of them is called elsewhere stays below
-    ``1 - quantile`` however many pairs there are (Bonferroni).
+    A pair's optimum (``offsets[k]``, from the joint result) differs from the other pairs'
+    mean by its noise and theirs (``own_covariances``: curvature and each pair's own
+    jackknife) and by the bias each single shot leaves, which no measure within a pair sees:
+    the pairs of one synthetic rig sit 0.1-1.4 cm / 0.01-0.16 deg (standard deviation per
+    axis) from each other, with every pair's own uncertainty far smaller. That bias is taken as
+    ``bias_floor`` (standard deviation per axis) or, with three or more pairs, as the spread of
+    the *other* pairs' optima where that is larger (estimated without the pair under test, so
+    that a pair far off cannot hide behind its own distance; on the axis itself or pooled over
+    the three axes of its kind, whichever is larger). Per axis, the residual over its standard
+    deviation is compared with the two-sided quantile of the normal (bias from the floor) or of
+    Student's t (bias estimated: ``K - 2`` degrees of freedom, ``3 (K - 2)`` pooled) at
+    ``(1 - quantile) / (6 K)``: with agreeing pairs the chance that any axis of any pair is
+    called elsewhere stays below ``1 - quantile`` whatever ``K`` (Bonferroni).
+
+    Parameters
+    ----------
+    offsets : ndarray of shape (K, 6)
+        Each pair's optimum minus the joint result, ``delta = [v, omega]`` (m, rad), K >= 2.
+    own_covariances : ndarray of shape (K, 6, 6)
+    bias_floor : array_like of shape (6,)
+        Least standard deviation of a pair's bias per axis (m, rad).
+    quantile : float
+        In (0, 1): :attr:`AssessConfig.pair_disagreement_quantile`.
+
+    Returns
+    -------
+    list of float
+        Per pair, the largest ``|residual| / (sigma * limit)`` over the axes: above 1 the pair
+        disagrees.
     """
-    from scipy.special import chdtri  # chi2.ppf(q, k) = chdtri(k, 1 - q), without scipy.stats
+    from scipy.special import ndtri, stdtrit  # without scipy.stats (~1 s to import)
 
-    return float(chdtri(6, (1.0 - quantile) / max(int(n_pairs), 1)))
+    offsets = np.asarray(offsets, dtype=np.float64)
+    own = np.array([np.diag(c) for c in np.asarray(own_covariances, dtype=np.float64)])
+    floor2 = np.asarray(bias_floor, dtype=np.float64) ** 2
+    n_pairs = len(offsets)
+    if n_pairs < 2:
+        raise ValueError("the pair test needs at least two pairs")
+    upper = 1.0 - 0.5 * (1.0 - quantile) / (6 * n_pairs)
+    out = []
+    for k in range(n_pairs):
+        others = np.delete(offsets, k, axis=0)
+        m = n_pairs - 1
+        # candidates for the bias variance per axis, each with the limit of its own precision:
+        # the floor (known: normal), the other pairs' spread pooled over the three axes of a
+        # kind (3 (K - 2) degrees of freedom, so that two pairs agreeing by chance on one axis
+        # do not make a third look far off) and on the axis itself (K - 2: an axis whose pairs
+        # scatter more than the others of its kind); the largest is used
+        variances, limits = [floor2], [np.full(6, float(ndtri(upper)))]
+        if m >= 2:
+            per_axis = np.var(others, axis=0, ddof=1)
+            variances += [np.repeat([per_axis[:3].mean(), per_axis[3:].mean()], 3), per_axis]
+            limits += [np.full(6, float(stdtrit(3 * (m - 1), upper))),
+                       np.full(6, float(stdtrit(m - 1, upper)))]  # fmt: skip
+        choice = np.argmax(np.array(variances), axis=0)
+        bias = np.choose(choice, variances)
+        limit = np.choose(choice, limits)
+        var = own[k] + np.delete(own, k, axis=0).mean(axis=0) / m + bias * (1.0 + 1.0 / m)
+        z = np.abs(offsets[k] - others.mean(axis=0)) / np.sqrt(var)
+        out.append(float(np.max(z / limit)))
+    return out
 
 
-def _reasons(q: Quality, n_negative: int, pair_mahalanobis: list[float]) -> list[tuple[str, str]]:
+def _reasons(q: Quality, n_negative: int, pair_ratios: list[float]) -> list[tuple[str, str]]:
     """``(kind, line)`` per reason to distrust the result (empty: ok); kinds of :data:`ADVICE`."""
     c = q.config
     reasons = []
@@ -968,11 +1021,8 @@ def _reasons(q: Quality, n_negative: int, pair_mahalanobis: list[float]) -> list
                 )
             )
     reasons += _move_reasons(q)
-    if pair_mahalanobis:
-        # one test per pair: at 1 - (1 - q) / K each, the chance of a false alarm over all K
-        # pairs stays below 1 - q however many pairs there are (Bonferroni)
-        limit = pair_disagreement_limit(c.pair_disagreement_quantile, len(pair_mahalanobis))
-        bad = [name for name, d2 in zip(q.names, pair_mahalanobis) if d2 > limit]
+    if pair_ratios:
+        bad = [name for name, ratio in zip(q.names, pair_ratios) if ratio > 1.0]
         if bad:
             reasons.append(
                 (
