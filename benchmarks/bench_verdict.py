@@ -245,6 +245,86 @@ def phase_calibrate(args) -> None:
         )
 
 
+# ------------------------------------------------------------------------------ guesses phase
+
+GUESS_SEED0 = 1000
+
+
+def guess_only(case: Path, base: Path, truth: Path, meta: dict) -> dict:
+    """``find-matches``, ``initial-guess`` on a copy of ``base``: the guess, its test, its error."""
+    work = case / "work"
+    shutil.rmtree(case, ignore_errors=True)
+    case.mkdir(parents=True)
+    shutil.copytree(base, work)
+    t0 = time.perf_counter()
+    checked("find-matches", work, "-q")
+    guess = nbcalib("initial-guess", work)
+    record = lambda: (  # noqa: E731
+        (json.loads((work / "calib.json").read_text()).get("nbcalib", {}).get("initial_guess")
+         or {}).get("init_T_lidar_camera_auto") or {}
+    )  # fmt: skip
+    row = {**meta, "guess_only": True, "guess_exit": guess.returncode}
+    row["guess_flagged_ok"] = bool(record().get("success", False))
+    if not record():  # refused, so not written: write it anyway to know its error
+        nbcalib("initial-guess", work, "--force")
+    row["guess_record"] = record()
+    ev = evaluate(work, truth, "init_T_lidar_camera_auto")
+    row["guess_t_m"] = None if ev is None else ev["translation_error_m"]
+    row["guess_r_deg"] = None if ev is None else ev["rotation_error_deg"]
+    row["t_m"] = row["r_deg"] = row["calibrate_exit"] = None
+    row["guess_s"] = round(time.perf_counter() - t0, 1)
+    (case / "row.json").write_text(json.dumps(row))
+    shutil.rmtree(work)  # the row holds what counts; the clouds are large
+    return row
+
+
+def phase_guesses(args) -> None:
+    """Automatic guesses alone: ``--guess-rigs`` one-pair rigs (seeds from 1000) and every real
+    set, for the success test's figures (the issue asks for 100 on check seeds)."""
+    root = Path(args.out)
+    jobs = []
+    for i in range(args.guess_rigs):
+        seed = GUESS_SEED0 + i
+        lidar, camera = COMBOS[i % len(COMBOS)]
+        scene = SCENES[int(np.random.default_rng([29, seed, 1]).integers(len(SCENES)))]
+        r = Rig(lidar, camera, scene, 1, seed)
+        folder = root / "guess_rigs" / r.name
+        meta = dict(part="synthetic", **asdict(r), half=r.half, rig=r.name, start="auto")
+        jobs.append((root / "cases" / f"guess_{r.name}", folder, meta, r))
+    if args.real and REAL_DATA.is_dir():
+        for case, ensure, base, truth, kind, meta in real_cases(root, REAL_DATA):
+            if kind == "reference":
+                jobs.append((case.with_name(case.name[: -len("_reference")] + "_guess"),
+                             (ensure, base, truth), {**meta, "start": "auto"}, None))  # fmt: skip
+    for case, where, meta, r in jobs:
+        if (case / "row.json").is_file():
+            continue
+        try:
+            if r is not None:
+                base, truth = where / "base", where / "synth" / "ground_truth.json"
+                if not (base / "calib.json").is_file():
+                    shutil.rmtree(where, ignore_errors=True)
+                    checked("synth", where / "synth", "--lidar", r.lidar, "--camera", r.camera,
+                            "--scene", r.scene, "--pairs", 1, "--seed", r.seed, "--format",
+                            "bag1", "-q")  # fmt: skip
+                    checked("preprocess", *sorted((where / "synth").glob("pair_*.bag")), base,
+                            "-q")  # fmt: skip
+                    for bag in (where / "synth").glob("pair_*.bag"):
+                        bag.unlink()
+            else:
+                ensure, base, truth = where
+                ensure()
+            row = guess_only(case, base, truth, meta)
+        except RuntimeError as exc:
+            print(f"{case.name}: {exc}", file=sys.stderr, flush=True)
+            continue
+        if r is not None:
+            shutil.rmtree(where, ignore_errors=True)
+        t, a = row["guess_t_m"], row["guess_r_deg"]
+        print(f"{case.name}: {'-' if t is None else f'{100 * t:.1f} cm / {a:.2f} deg'}, "
+              f"ok {row['guess_flagged_ok']} ({row['guess_s']:.0f} s)", flush=True)  # fmt: skip
+
+
 # ------------------------------------------------------------------------------ report phase
 
 
@@ -316,7 +396,7 @@ def guess_stats(case: Path) -> dict:
     tuned on the stored guesses without matching again; the guess must equal the stored one.
     """
     from nbcalib.config import config_from_record
-    from nbcalib.initial_guess.estimate import estimate_initial_guess, pose_uncertainty
+    from nbcalib.initial_guess.estimate import estimate_initial_guess
     from nbcalib.pipeline import Calibrator
     from nbcalib.workdir import WorkDir
 
@@ -333,10 +413,6 @@ def guess_stats(case: Path) -> dict:
     same = stored is not None and np.allclose(
         invert_T(pose_from_xyz_quat(stored)), guess.T_camera_lidar, atol=1e-6
     )
-    inl = guess.inliers
-    t_b, r_b = pose_uncertainty(
-        camera, guess.T_camera_lidar, corr.uv_camera[inl], corr.points_lidar[inl]
-    )
     return {
         "same_as_stored": bool(same),
         "success": bool(guess.success),
@@ -346,8 +422,9 @@ def guess_stats(case: Path) -> dict:
         "support": guess.support,
         "runner_up": guess.runner_up,
         "runner_up_shared": guess.runner_up_shared,
-        "bound_m": t_b,
-        "bound_deg": r_b,
+        "bound_m": guess.bound_m,
+        "bound_deg": guess.bound_deg,
+        "failure": guess.failure,
     }
 
 
@@ -424,18 +501,38 @@ def load_cases(root: Path, overrides: dict) -> list[dict]:
     return out
 
 
-def covered(row: dict) -> tuple[list[bool], list[bool]] | None:
-    """Per axis (6) and per norm (2): does the stated 95 % interval hold the error?"""
+#: How far each real set's reference may be from the truth, 95 % (metres, degrees): the data's
+#: README ("How far to trust it"). A stated interval bounds the error against the *truth*; against
+#: a reference it is judged with this allowance added in quadrature (per axis 0.70 of the norm
+#: bound, as for an isotropic Gaussian in three dimensions), and without it ("raw").
+REFERENCE_TRUST = {
+    "kitti-scan": (0.03, 0.3),  # "a few tenths of a degree and a few centimetres"
+    "kitti-shot": (0.03, 0.3),
+    "kitti-odometry": (0.03, 0.3),
+    "pjlab": (0.03, 0.2),  # "overlays line up to a few pixels" (1920 px, f ~ 2000 px)
+    "acfr": (0.05, 1.0),  # "score a calibrator with about 1 deg and 5 cm of tolerance"
+    "waymo": (0.03, 0.2),  # "about 0.2 deg and a few cm" (no distortion model)
+}
+
+
+def covered(row: dict, reference: bool = True) -> tuple[list[bool], list[bool]] | None:
+    """Per axis (6) and per norm (2): does the stated 95 % interval hold the error?
+
+    On real sets with ``reference``, the reference's own uncertainty (:data:`REFERENCE_TRUST`)
+    is added in quadrature.
+    """
     rep = row["report"]
     if "delta" not in rep:
         return None
     u, d = rep["uncertainty"], np.abs(rep["delta"])
     half = np.r_[np.array(u["translation_cm"]) / 100.0, np.radians(u["rotation_deg"])]
+    t_total, r_total = u["translation_total_cm"] / 100.0, u["rotation_total_deg"]
+    if row["part"] == "real" and reference:
+        ref_m, ref_deg = REFERENCE_TRUST[row["group"]]
+        half = np.hypot(half, 0.70 * np.r_[[ref_m] * 3, [np.radians(ref_deg)] * 3])
+        t_total, r_total = np.hypot(t_total, ref_m), np.hypot(r_total, ref_deg)
     axes = (d <= half).tolist()
-    norms = [
-        100.0 * row["t_m"] <= u["translation_total_cm"],
-        row["r_deg"] <= u["rotation_total_deg"],
-    ]
+    norms = [row["t_m"] <= t_total, row["r_deg"] <= r_total]
     return axes, norms
 
 
@@ -447,17 +544,20 @@ def coverage_table(rows: list[dict], half: str) -> list[dict]:
         c = covered(row)
         if c is None:
             continue
+        raw = covered(row, reference=False)
         for g in groups_of(row):
-            t = table.setdefault(g, {"runs": 0, "axes": [], "norms": [], "ok_axes": []})
+            t = table.setdefault(g, {"runs": 0, "axes": [], "norms": [], "ok_axes": [], "raw": []})
             t["runs"] += 1
             t["axes"] += c[0]
             t["norms"] += c[1]
+            t["raw"] += raw[0]
             if row["report"]["verdict"] == "ok":
                 t["ok_axes"] += c[0]
     return [
         {"group": g, "runs": t["runs"],
          "axis_coverage": float(np.mean(t["axes"])),
          "norm_coverage": float(np.mean(t["norms"])),
+         "raw_axis_coverage": float(np.mean(t["raw"])),
          "ok_axis_coverage": float(np.mean(t["ok_axes"])) if t["ok_axes"] else None}
         for g, t in sorted(table.items())
     ]  # fmt: skip
@@ -467,7 +567,9 @@ def verdict_table(rows: list[dict], half: str) -> dict:
     """Counts of (part, error class, verdict); a failed calibrate or report is 'failed'."""
     counts = {}
     for row in rows:
-        if row["half"] != half or (row.get("start") == "auto" and not row.get("guess_flagged_ok")):
+        if row["half"] != half or row.get("guess_only"):
+            continue
+        if row.get("start") == "auto" and not row.get("guess_flagged_ok"):
             continue
         rep = row["report"]
         if row.get("calibrate_exit") == 0 and not rep:
@@ -479,10 +581,13 @@ def verdict_table(rows: list[dict], half: str) -> dict:
 
 
 def guess_table(rows: list[dict], half: str) -> dict:
-    out = {"guesses": 0, "false_ok": [], "good_refused": 0, "good": 0, "within": 0, "ok": 0}
+    """The success test against the paper's 1 deg / 0.5 m, per part, over the guesses phase."""
+    table = {}
     for row in rows:
-        if row.get("start") != "auto" or row["half"] != half or row.get("guess_t_m") is None:
+        if not row.get("guess_only") or row["half"] != half or row.get("guess_t_m") is None:
             continue
+        out = table.setdefault(row["part"], {"guesses": 0, "false_ok": [], "good_refused": [],
+                                             "good": 0, "within": 0, "ok": 0})  # fmt: skip
         t, r, ok = row["guess_t_m"], row["guess_r_deg"], row["guess_flagged_ok"]
         out["guesses"] += 1
         within = t <= 0.5 and r <= 1.0
@@ -492,8 +597,9 @@ def guess_table(rows: list[dict], half: str) -> dict:
             out["false_ok"].append(f"{row['case']} ({100 * t:.1f} cm / {r:.2f} deg)")
         if t <= 0.1 and r <= 0.5:
             out["good"] += 1
-            out["good_refused"] += not ok
-    return out
+            if not ok:
+                out["good_refused"].append(f"{row['case']} ({100 * t:.1f} cm / {r:.2f} deg)")
+    return table
 
 
 def phase_analyse(args) -> None:
@@ -509,20 +615,23 @@ def phase_analyse(args) -> None:
     for half in ("tune", "check"):
         print(f"\n== {half} half ==")
         cov = coverage_table(rows, half)
-        print(f"{'group':<28}{'runs':>5}{'axes':>8}{'norms':>8}{'axes of ok':>12}")
+        print(f"{'group':<28}{'runs':>5}{'axes':>8}{'norms':>8}{'axes of ok':>12}"
+              f"{'axes raw':>10}")  # fmt: skip
         for c in cov:
             ok = "-" if c["ok_axis_coverage"] is None else f"{100 * c['ok_axis_coverage']:.1f}"
             print(f"{c['group']:<28}{c['runs']:>5}{100 * c['axis_coverage']:>8.1f}"
-                  f"{100 * c['norm_coverage']:>8.1f}{ok:>12}")  # fmt: skip
+                  f"{100 * c['norm_coverage']:>8.1f}{ok:>12}"
+                  f"{100 * c['raw_axis_coverage']:>10.1f}")  # fmt: skip
         verdicts = verdict_table(rows, half)
         print("\nverdicts (part | error class | verdict: count)")
         for key in sorted(verdicts):
             print(f"  {key}: {verdicts[key]}")
         guesses = guess_table(rows, half)
-        print(f"\nguesses: {guesses['guesses']}, within 1 deg / 0.5 m {guesses['within']}, "
-              f"called ok {guesses['ok']}, false ok {len(guesses['false_ok'])} "
-              f"{guesses['false_ok']}, good (0.5 deg / 0.1 m) refused "
-              f"{guesses['good_refused']} of {guesses['good']}")  # fmt: skip
+        for part, g in sorted(guesses.items()):
+            print(f"\nguesses ({part}): {g['guesses']}, within 1 deg / 0.5 m {g['within']}, "
+                  f"called ok {g['ok']}, false ok {len(g['false_ok'])} {g['false_ok']}, good "
+                  f"(0.5 deg / 0.1 m) refused {len(g['good_refused'])} of {g['good']} "
+                  f"{g['good_refused']}")  # fmt: skip
         summary[half] = {"coverage": cov, "verdicts": verdicts, "guesses": guesses}
     print(json.dumps(summary))
 
@@ -533,8 +642,12 @@ def main(argv=None) -> int:
     ap.add_argument("--rigs", type=int, default=80, help="synthetic rigs (seeds 0 .. N-1)")
     ap.add_argument("--no-real", dest="real", action="store_false", help="synthetic rigs only")
     ap.add_argument(
-        "--phase", choices=("calibrate", "report", "guess", "analyse", "all"), default="all"
+        "--phase",
+        choices=("calibrate", "report", "guess", "guesses", "analyse", "all"),
+        default="all",
     )
+    ap.add_argument("--guess-rigs", type=int, default=240,
+                    help="guesses phase: one-pair synthetic rigs (seeds 1000 ..)")  # fmt: skip
     ap.add_argument("--rejudge", nargs="*", metavar="KEY=VALUE",
                     help="analyse: judge the stored reports again with AssessConfig settings "
                     "(tuning; the figures that count come from nbcalib report)")  # fmt: skip
@@ -545,6 +658,8 @@ def main(argv=None) -> int:
         phase_report(args)
     if args.phase in ("guess", "all"):
         phase_guess(args)
+    if args.phase == "guesses":  # not in "all": hours of matching on its own
+        phase_guesses(args)
     if args.phase in ("analyse", "all"):
         phase_analyse(args)
     return 0

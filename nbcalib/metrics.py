@@ -11,6 +11,8 @@ import numpy as np
 
 from nbcalib.transforms import invert_T, pose_error
 
+__all__ = ["interval_quantiles", "pose_errors"]
+
 
 def pose_errors(T_camera_lidar_est: np.ndarray, T_camera_lidar_true: np.ndarray) -> dict:
     """Compute the translation and rotation error of an estimated extrinsic.
@@ -35,3 +37,42 @@ def pose_errors(T_camera_lidar_est: np.ndarray, T_camera_lidar_true: np.ndarray)
         "translation_error_m": float(translation_error_m),
         "rotation_error_deg": float(rotation_error_deg),
     }
+
+
+#: Seed of the Monte-Carlo quantiles of the total translation/rotation error (deterministic).
+_QUANTILE_SEED = 20261123
+_QUANTILE_SAMPLES = 20000
+
+
+def interval_quantiles(
+    covariance: np.ndarray, confidence: float
+) -> tuple[np.ndarray, float, float]:
+    """Half-widths and norm bounds of a Gaussian ``delta`` at ``confidence``.
+
+    Parameters
+    ----------
+    covariance : ndarray of shape (6, 6), float64
+        Covariance of ``delta = [v, omega]`` (m, rad).
+    confidence : float
+        In (0, 1).
+
+    Returns
+    -------
+    half_widths : ndarray of shape (6,)
+        ``z * sigma`` per axis (two-sided), metres then radians.
+    translation_bound : float
+        Quantile of ``|v|`` (metres), by seeded Monte Carlo.
+    rotation_bound : float
+        Quantile of ``|omega|`` (radians).
+    """
+    from statistics import NormalDist  # scipy.stats costs ~1 s to import
+
+    cov = 0.5 * (covariance + covariance.T)
+    sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    z = NormalDist().inv_cdf(0.5 + confidence / 2.0)
+    rng = np.random.default_rng(_QUANTILE_SEED)
+    w, V = np.linalg.eigh(cov)
+    samples = (rng.standard_normal((_QUANTILE_SAMPLES, 6)) * np.sqrt(np.clip(w, 0, None))) @ V.T
+    t_bound = float(np.quantile(np.linalg.norm(samples[:, :3], axis=1), confidence))
+    r_bound = float(np.quantile(np.linalg.norm(samples[:, 3:], axis=1), confidence))
+    return z * sigma, t_bound, r_bound

@@ -325,6 +325,8 @@ class Calibrator:
             seed=self.config.seed,
             weights=corr.weights if cfg.confidence_weights else None,
             min_inliers=cfg.min_manual_inliers if manual else cfg.min_inliers,
+            # a few picks make wide bounds, without the shared error of learned matches
+            precision_scale=0.0 if manual else cfg.precision_scale,
         )
         self.guess, self._guess_corr = guess, corr
         _detail(guess.summary())
@@ -366,6 +368,8 @@ class Calibrator:
                 "support": guess.support,
                 "runner_up": guess.runner_up,
                 "runner_up_shared": guess.runner_up_shared,
+                "bound_m": _rounded(guess.bound_m, 5),
+                "bound_deg": _rounded(guess.bound_deg, 4),
                 "success": bool(guess.success),
                 "seed": self.config.seed,
                 "confidence_weights": bool(cfg.confidence_weights and corr.confidence is not None),
@@ -796,6 +800,11 @@ class Calibrator:
 
 def _detail(line: str) -> None:
     log.info("    %s", line)
+
+
+def _rounded(value: float, digits: int) -> float | None:
+    """``value`` rounded for calib.json, None when not finite (JSON has no inf)."""
+    return round(float(value), digits) if np.isfinite(value) else None
 
 
 def _uncertainty_record(uncertainty) -> dict | None:

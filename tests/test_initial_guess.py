@@ -43,7 +43,12 @@ def test_every_camera_model_with_80_percent_outliers(model):
     camera = example_camera(model, 640, 480)
     truth = default_T_camera_lidar("spinning", 7)
     c = synthetic_correspondences(camera, truth, 3, n_inliers=60, outlier_fraction=0.8)
-    guess = estimate_initial_guess(camera, c.uv_camera, c.points_lidar, ransac_iterations=4096)
+    # RANSAC's robustness alone: 60 matches with 1.4 px of noise bound a wide 640 x 480 camera's
+    # pose to ~0.15 deg, which the precision test's factor for learned matches' shared error
+    # (tested below) would refuse
+    guess = estimate_initial_guess(
+        camera, c.uv_camera, c.points_lidar, ransac_iterations=4096, precision_scale=0.0
+    )
     _assert_success(guess, truth)
     # the inliers found are true correspondences, and most true ones are found
     assert np.mean(c.is_inlier[guess.inliers]) > 0.95
@@ -58,7 +63,9 @@ def test_wide_cameras_looking_sideways_or_backwards(model, yaw):
     camera = example_camera(model, 640, 480)
     truth = _camera_looking(yaw)
     c = synthetic_correspondences(camera, truth, 5, n_inliers=50, outlier_fraction=0.85)
-    guess = estimate_initial_guess(camera, c.uv_camera, c.points_lidar, ransac_iterations=4096)
+    guess = estimate_initial_guess(
+        camera, c.uv_camera, c.points_lidar, ransac_iterations=4096, precision_scale=0.0
+    )
     _assert_success(guess, truth)
 
 
@@ -341,3 +348,24 @@ def test_pose_uncertainty_covers_the_error_of_noisy_correct_matches():
     assert np.median(bounds[80]) < 0.7 * np.median(bounds[20])
     few = synthetic_correspondences(camera, truth, 0, n_inliers=3, outlier_fraction=0.0)
     assert pose_uncertainty(camera, truth, few.uv_camera, few.points_lidar) == (math.inf,) * 2
+
+
+def test_a_guess_its_matches_bound_too_loosely_is_refused():
+    # matches that share an error (a rendered LiDAR image against a photograph) fit a wrong pose
+    # as well as noise allows: the success test asks that precision_scale times the bounds their
+    # noise leaves be within the paper's 1 deg / 0.5 m. Few noisy matches on one side of the
+    # image, all shifted alike, put the pose over a degree off: refused, and so without the test
+    camera = example_camera("pinhole", 640, 480)
+    truth = default_T_camera_lidar("spinning", 7)
+    c = synthetic_correspondences(camera, truth, 2, n_inliers=40, outlier_fraction=0.3)
+    rng = np.random.default_rng(2)
+    uv = c.uv_camera + rng.normal(0.0, 3.0, c.uv_camera.shape)
+    uv[c.is_inlier] += [14.0, -6.0]  # the shared error: about 1.2 deg
+    loose = estimate_initial_guess(camera, uv, c.points_lidar)
+    assert pose_errors(loose.T_camera_lidar, truth)["rotation_error_deg"] > 1.0
+    assert not loose.success and loose.failure.startswith("imprecise"), loose.failure
+    assert estimate_initial_guess(camera, uv, c.points_lidar, precision_scale=0.0).success
+    # many precise matches pass
+    many = synthetic_correspondences(camera, truth, 2, n_inliers=600, outlier_fraction=0.3)
+    tight = estimate_initial_guess(camera, many.uv_camera, many.points_lidar)
+    assert tight.success and tight.precise and 0 < tight.bound_deg < 0.05, tight.summary()

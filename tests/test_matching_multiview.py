@@ -188,7 +188,11 @@ def test_match_views_finds_the_heading_and_the_pose_with_sift(rng, yaw_deg):
     assert abs((refined - yaw_deg + 180.0) % 360.0 - 180.0) < 1.0
     corr = mv.correspondences
     assert len(corr) >= 20 and corr.names == ("p",)
-    guess = estimate_initial_guess(camera, corr.uv_camera, corr.points_lidar, weights=corr.weights)
+    # the matches' own test (a tiny SIFT scene bounds the pose to ~0.14 deg, which the default
+    # precision test for learned matches' shared error refuses: tests/test_initial_guess.py)
+    guess = estimate_initial_guess(
+        camera, corr.uv_camera, corr.points_lidar, weights=corr.weights, precision_scale=0.0
+    )
     e = pose_errors(guess.T_camera_lidar, truth)
     assert guess.success
     assert e["rotation_error_deg"] < TOL["multiview_self_consistent_deg"]["atol"]
@@ -296,7 +300,7 @@ def test_find_matches_views_then_initial_guess_on_a_work_directory(tmp_path, mon
     corr = wd.read_correspondences(wd.load_pair("000000"), search_radius=0.0)
     assert len(corr) >= 20 and m.num_matches <= len(corr)
     assert (wd.path / "000000_matches.png").is_file()
-    assert main(["-q", "initial-guess", str(wd.path)]) == 0
+    assert main(["-q", "initial-guess", str(wd.path), "--precision-scale", "0"]) == 0
     e = pose_errors(wd.read_calib().get_T_camera_lidar(AUTO_STAGE), truth)
     assert e["rotation_error_deg"] < TOL["multiview_self_consistent_deg"]["atol"]
     assert e["translation_error_m"] < TOL["multiview_self_consistent_m"]["atol"]

@@ -256,6 +256,33 @@ def test_image_regions_add_their_spread_to_the_uncertainty():
     assert q.uncertainty["rotation_total_deg"] > without["rotation_total_deg"]
 
 
+def test_with_the_structure_term_the_hessian_is_the_whole_costs(monkeypatch):
+    # the regional terms' Hessian comes from their blocks, the structure term's from its own
+    # differences: together the whole cost's, without measuring the regions twice
+    from nbcalib.registration.refine import RefineConfig, build_cost
+    from nbcalib.report import quality as quality_module
+
+    many = make_pair(1, n=24000)
+    config = RefineConfig(structure_weight=0.5)
+    seen = []
+    true_hessian = quality_module._hessian
+
+    def spy(cost, T, steps, blocks=None):
+        H = true_hessian(cost, T, steps, blocks)
+        seen.append((cost, H))
+        return H
+
+    monkeypatch.setattr(quality_module, "_hessian", spy)
+    q = assess([many], np.eye(4), config=config)
+    (rest, H), whole_cost = (
+        seen[0],
+        build_cost([many], np.eye(4), replace(config, optimizer="lbfgs"))[0],
+    )
+    assert rest is not None and len(rest.costs) < len(whole_cost.costs) and len(q.block_pair) >= 3
+    whole = true_hessian(whole_cost, np.eye(4), np.array([0.005] * 3 + [np.radians(0.1)] * 3))
+    np.testing.assert_allclose(H, whole, rtol=1e-6, atol=1e-9 * np.abs(whole).max())
+
+
 def test_saved_quality_is_judged_again_to_the_same_verdict(tmp_path, quality_at_truth):
     from nbcalib.report import load_quality
 

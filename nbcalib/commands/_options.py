@@ -203,6 +203,10 @@ INITIAL_GUESS = (
            "N"),
     Option("--min-manual-inliers", "initial_guess.min_manual_inliers",
            "inliers needed to accept a guess from manual picks", "N"),
+    Option("--precision-scale", "initial_guess.precision_scale",
+           "accept an automatic guess only if K times its inliers' 95 %% noise bounds lie "
+           "within 1 deg / 0.5 m (for the matches' shared error; 0: no such test)",
+           "K"),
     Option("--no-confidence-weights", "initial_guess.confidence_weights",
            "weigh every match equally in the LM cost (paper Eq. 1, the reference) instead of "
            "by the matcher's confidence", value=False),

@@ -49,6 +49,17 @@ class InitialGuessConfig:
         inliers included (0: no such test). Wrong matches on real frames passed the first
         test alone (27 against 12, a guess 153 degrees off) but not this one (27 against 20);
         correct guesses had 1.7-3.3x (docs/BENCHMARKS.md, "Initial guess on real data").
+    precision_scale : float
+        Success needs the guess's error bounds from its inliers' reprojections
+        (:func:`nbcalib.initial_guess.estimate.pose_uncertainty`, 95 %) times this within
+        ``max_start_translation`` and ``max_start_rotation_deg`` (0: no such test). The bounds
+        see the keypoints' noise, not the error the matches share (a rendered LiDAR image
+        against a photograph): automatic guesses were 2-6x, once 16x, their bound off
+        (docs/BENCHMARKS.md 11). Not applied to hand-picked correspondences, whose few picks
+        make wide bounds without a shared error.
+    max_start_translation, max_start_rotation_deg : float
+        How far a start may be from the truth for fine registration to find it: the paper's
+        0.5 m and 1 deg.
     candidates : int
         RANSAC rotations refined by LM (near-field parallax, which rotation-only RANSAC
         ignores, can make the true rotation only the second or third best).
@@ -79,6 +90,9 @@ class InitialGuessConfig:
     min_manual_inliers: int = 3
     min_distinctiveness: float = 2.0
     min_shared_distinctiveness: float = 1.5
+    precision_scale: float = 8.0
+    max_start_translation: float = 0.5
+    max_start_rotation_deg: float = 1.0
     candidates: int = 8
     local_optimization: bool = True
     initial_translation: str = "bearing"
@@ -104,10 +118,13 @@ class InitialGuessConfig:
         ):
             if int(getattr(self, name)) < 1:
                 raise ValueError(f"{name} must be an integer >= 1, got {getattr(self, name)}")
-        for name in ("min_distinctiveness", "min_shared_distinctiveness"):
+        for name in ("min_distinctiveness", "min_shared_distinctiveness", "precision_scale"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be >= 0, got {value}")
+        for name in ("max_start_translation", "max_start_rotation_deg"):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be > 0, got {getattr(self, name)}")
         if not self.max_initial_translation >= 0:
             raise ValueError(
                 f"max_initial_translation must be >= 0, got {self.max_initial_translation}"

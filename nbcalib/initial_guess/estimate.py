@@ -67,6 +67,7 @@ from nbcalib.initial_guess.ransac import (
     estimate_rotation_ransac,
     usable_correspondences,
 )
+from nbcalib.metrics import interval_quantiles
 from nbcalib.transforms import make_T
 
 __all__ = [
@@ -139,6 +140,14 @@ class InitialGuess:
         included).
     min_shared_distinctiveness : float
         ``support / runner_up_shared`` needed for ``success``.
+    bound_m, bound_deg : float
+        95 % bounds on the pose's error from its inliers' reprojections
+        (:func:`pose_uncertainty`): what their noise leaves, not their shared error.
+    precision_scale : float
+        ``success`` needs ``precision_scale`` times these bounds within ``max_error_m`` and
+        ``max_error_deg`` (0: no such test).
+    max_error_m, max_error_deg : float
+        How far a start may be from the truth for fine registration (the paper: 0.5 m, 1 deg).
     """
 
     T_camera_lidar: np.ndarray
@@ -157,6 +166,19 @@ class InitialGuess:
     min_distinctiveness: float = 0.0
     runner_up_shared: int = 0
     min_shared_distinctiveness: float = 0.0
+    bound_m: float = math.inf
+    bound_deg: float = math.inf
+    precision_scale: float = 0.0
+    max_error_m: float = math.inf
+    max_error_deg: float = math.inf
+
+    @property
+    def precise(self) -> bool:
+        """``precision_scale`` times the bounds within ``max_error_m`` and ``max_error_deg``."""
+        k = self.precision_scale
+        return k <= 0 or (
+            k * self.bound_m <= self.max_error_m and k * self.bound_deg <= self.max_error_deg
+        )
 
     @property
     def distinctiveness(self) -> float:
@@ -180,6 +202,14 @@ class InitialGuess:
                 f"{self.runner_up} of the correspondences this one leaves out, this one "
                 f"{self.support} (need {self.min_distinctiveness:g}x)"
             )
+        if not self.precise:
+            k = self.precision_scale
+            return (
+                f"imprecise: its inliers bound it to {100 * self.bound_m:.1f} cm / "
+                f"{self.bound_deg:.2f} deg, times {k:g} for the matches' shared error "
+                f"{100 * k * self.bound_m:.0f} cm / {k * self.bound_deg:.1f} deg, more than the "
+                f"{self.max_error_m:g} m / {self.max_error_deg:g} deg fine registration starts from"
+            )
         return ""
 
     @property
@@ -199,7 +229,8 @@ class InitialGuess:
         return (
             f"{self.n_correspondences} correspondences, RANSAC inliers {self.ransac.n_inliers}, "
             f"final inliers {self.n_inliers} (< {self.threshold:g} px), RMS {rms}, "
-            f"{self.distinctiveness:.1f}x the best other rotation: {verdict}"
+            f"{self.distinctiveness:.1f}x the best other rotation, noise bounds "
+            f"{100 * self.bound_m:.1f} cm / {self.bound_deg:.2f} deg: {verdict}"
         )
 
 
@@ -212,7 +243,7 @@ def pose_uncertainty(
     perturbation of ``T_camera_lidar``; ``|v|`` is the camera centre's displacement), ``J`` the
     reprojection Jacobian of the given correspondences and ``s^2`` their residuals' variance
     (``2M - 6`` degrees of freedom); then the ``confidence`` quantiles of ``|v|`` and
-    ``|omega|`` (:func:`nbcalib.report.quality.interval_quantiles`). It sees the noise of the
+    ``|omega|`` (:func:`nbcalib.metrics.interval_quantiles`). It sees the noise of the
     keypoints and how the points' spread over the image and in depth constrains each
     direction (points on one wall at one depth leave rotation and translation coupled); not
     matches that are wrong in the same way.
@@ -224,8 +255,6 @@ def pose_uncertainty(
     rotation : float
         Degrees.
     """
-    from nbcalib.report.quality import interval_quantiles
-
     r, J, valid = reprojection_residuals(camera, T_camera_lidar, uv_camera, points_lidar)
     ok = valid & np.isfinite(r).all(axis=1) & np.isfinite(J).all(axis=(1, 2))
     if np.count_nonzero(ok) < 4:
@@ -629,7 +658,8 @@ def estimate_initial_guess(
     distinct = support >= cfg.min_distinctiveness * max(runner_up, 1) and (
         support >= cfg.min_shared_distinctiveness * max(runner_up_shared, 1)
     )
-    return InitialGuess(
+    bound_m, bound_deg = pose_uncertainty(camera, T_final, uv[inliers], points[inliers])
+    guess = InitialGuess(
         T_camera_lidar=T_final,
         inliers=inliers,
         errors=errors,
@@ -646,7 +676,13 @@ def estimate_initial_guess(
         min_distinctiveness=float(cfg.min_distinctiveness),
         runner_up_shared=runner_up_shared,
         min_shared_distinctiveness=float(cfg.min_shared_distinctiveness),
+        bound_m=bound_m,
+        bound_deg=bound_deg,
+        precision_scale=float(cfg.precision_scale),
+        max_error_m=float(cfg.max_start_translation),
+        max_error_deg=float(cfg.max_start_rotation_deg),
     )
+    return replace(guess, success=guess.success and guess.precise)
 
 
 #: RANSAC rotations beyond :data:`DISTINCT_ROTATION_DEG` tried as the runner-up answer.

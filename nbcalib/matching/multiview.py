@@ -154,8 +154,16 @@ def _refined_view(camera, corr, guess_config, seed, render, match) -> ViewMatche
     from nbcalib.initial_guess.estimate import estimate_initial_guess
 
     try:
+        # the view is rendered from a roughly right pose to make the matches precise: the
+        # success test's precision part (for fine registration's start) does not apply
         guess = estimate_initial_guess(
-            camera, corr.uv_camera, corr.points_lidar, guess_config, weights=corr.weights, seed=seed
+            camera,
+            corr.uv_camera,
+            corr.points_lidar,
+            guess_config,
+            weights=corr.weights,
+            seed=seed,
+            precision_scale=0.0,
         )
     except InputError:
         return None

@@ -81,9 +81,10 @@ from dataclasses import asdict, dataclass, field, fields, replace
 
 import numpy as np
 
+from nbcalib.metrics import interval_quantiles
 from nbcalib.progress import Progress
 from nbcalib.registration.costs.regional import median_cut_regions
-from nbcalib.registration.nid import GroupedNIDCost
+from nbcalib.registration.nid import GroupedNIDCost, MultiNIDCost
 from nbcalib.registration.refine import RefineConfig, RegistrationPair, build_cost, visible_subset
 from nbcalib.registration.trust import on_trust_boundary
 from nbcalib.report.config import AssessConfig
@@ -101,10 +102,6 @@ __all__ = [
 
 #: Names of the six tangent axes, in the order of ``delta = [v, omega]`` (camera axes).
 AXIS_NAMES = ("tx", "ty", "tz", "rx", "ry", "rz")
-
-#: Seed of the Monte-Carlo quantiles of the total translation/rotation error (deterministic).
-_QUANTILE_SEED = 20261123
-_QUANTILE_SAMPLES = 20000
 
 
 @dataclass
@@ -445,16 +442,20 @@ def assess(
             grouped = [
                 (t, w) for t, w in zip(cost.costs, cost.weights) if isinstance(t, GroupedNIDCost)
             ]
-            H_raw, whole = np.zeros((6, 6)), None
-            if counts[0] > 0 and grouped:
-                g_b, h_b = _block_material(grouped, T, steps, acfg.jackknife_blocks)
-                block_pair += [len(costs)] * len(g_b)
-                block_grads.append(g_b)
-                block_hessians.append(h_b)
-                if len(grouped) == len(cost.costs):  # the blocks make up the whole cost
-                    whole = h_b
+            H_raw = np.zeros((6, 6))
             if counts[0] > 0:
-                H_raw = _hessian(cost, T, steps, whole)
+                blocks = None
+                if grouped:  # the regional terms' Hessians, measured once for the blocks
+                    g_b, blocks = _block_material(grouped, T, steps, acfg.jackknife_blocks)
+                    block_pair += [len(costs)] * len(g_b)
+                    block_grads.append(g_b)
+                    block_hessians.append(blocks)
+                rest = [
+                    (t, w)
+                    for t, w in zip(cost.costs, cost.weights)
+                    if not isinstance(t, GroupedNIDCost)
+                ]
+                H_raw = _hessian(MultiNIDCost(*zip(*rest)) if rest else None, T, steps, blocks)
             H, n_again = H_raw, 0
             if counts[0] > 0:
                 H, n_again = _remeasure_flat_directions(
@@ -594,21 +595,18 @@ def _pixels_covered(pair: RegistrationPair, T: np.ndarray, config: RefineConfig)
 
 
 def _hessian(cost, T: np.ndarray, steps: np.ndarray, blocks=None) -> np.ndarray:
-    """Symmetric Hessian (6, 6) of ``cost`` w.r.t. ``delta`` by central differences of grads.
+    """Symmetric Hessian (6, 6) w.r.t. ``delta`` by central differences of gradients.
 
-    ``blocks`` (B, 6, 6): Hessians of parts that sum to ``cost`` (:func:`_block_material`),
-    measured with the same steps; their sum is returned without evaluating ``cost`` again.
+    ``cost``: the terms measured here (None: none); ``blocks`` (B, 6, 6): Hessians of the other
+    terms' parts (:func:`_block_material`, the same steps), added without evaluating them again.
     """
-    if blocks is not None:
-        H = np.sum(blocks, axis=0)
-        return 0.5 * (H + H.T)
-    H = np.empty((6, 6))
-    for j in range(6):
+    H = np.zeros((6, 6)) if blocks is None else np.sum(blocks, axis=0)
+    for j in range(6 if cost is not None else 0):
         d = np.zeros(6)
         d[j] = steps[j]
         _, g_plus = cost.value_and_grad(se3_exp(d) @ T)
         _, g_minus = cost.value_and_grad(se3_exp(-d) @ T)
-        H[:, j] = (g_plus - g_minus) / (2.0 * steps[j])
+        H[:, j] += (g_plus - g_minus) / (2.0 * steps[j])
     return 0.5 * (H + H.T)
 
 
@@ -754,40 +752,6 @@ def _jackknife(block_gradients, block_hessians, spans) -> np.ndarray | None:
         steps[b] = np.clip(step, -spans, spans)
     d = steps - steps.mean(axis=0)
     return (B - 1) / B * (d.T @ d)
-
-
-def interval_quantiles(
-    covariance: np.ndarray, confidence: float
-) -> tuple[np.ndarray, float, float]:
-    """Half-widths and norm bounds of a Gaussian ``delta`` at ``confidence``.
-
-    Parameters
-    ----------
-    covariance : ndarray of shape (6, 6), float64
-        Covariance of ``delta = [v, omega]`` (m, rad).
-    confidence : float
-        In (0, 1).
-
-    Returns
-    -------
-    half_widths : ndarray of shape (6,)
-        ``z * sigma`` per axis (two-sided), metres then radians.
-    translation_bound : float
-        Quantile of ``|v|`` (metres), by seeded Monte Carlo.
-    rotation_bound : float
-        Quantile of ``|omega|`` (radians).
-    """
-    from statistics import NormalDist  # scipy.stats costs ~1 s to import
-
-    cov = 0.5 * (covariance + covariance.T)
-    sigma = np.sqrt(np.clip(np.diag(cov), 0.0, None))
-    z = NormalDist().inv_cdf(0.5 + confidence / 2.0)
-    rng = np.random.default_rng(_QUANTILE_SEED)
-    w, V = np.linalg.eigh(cov)
-    samples = (rng.standard_normal((_QUANTILE_SAMPLES, 6)) * np.sqrt(np.clip(w, 0, None))) @ V.T
-    t_bound = float(np.quantile(np.linalg.norm(samples[:, :3], axis=1), confidence))
-    r_bound = float(np.quantile(np.linalg.norm(samples[:, 3:], axis=1), confidence))
-    return z * sigma, t_bound, r_bound
 
 
 def _uncertainty(covariance: np.ndarray, confidence: float) -> dict:
