@@ -156,7 +156,11 @@ def test_an_unknown_lidar_image_says_the_virtual_camera_is_unknown(livox, tmp_pa
 
 def test_initial_guess_reads_the_reference_superglue_matches(livox, tmp_path, no_models):
     work = WorkDir(_copy(livox, tmp_path))
-    assert main(["-q", "initial-guess", str(work.path)]) == 0
+    # reading the reference's matches is the subject: on this small scene they bound the pose
+    # to 0.14 deg, which the default precision test (times 8 for learned matches' shared error)
+    # refuses; the exit status says so
+    assert main(["-q", "initial-guess", str(work.path)]) == 2
+    assert main(["-q", "initial-guess", str(work.path), "--precision-scale", "0"]) == 0
     e = pose_errors(work.read_calib().get_T_camera_lidar(AUTO_STAGE), livox.T_camera_lidar)
     assert e["translation_error_m"] < 0.02 and e["rotation_error_deg"] < 0.2, e
 
