@@ -43,6 +43,11 @@ the threshold is wide: counted over all correspondences, a correct synthetic gue
 rotation-only RANSAC's own measure instead, near points (a room, 1-10 m, the camera up to 30 cm
 from the LiDAR) give rotations several degrees off the answer support through their parallax,
 and 28 % of good room guesses were called not distinct.
+
+And the answer must be *precise*: ``precision_scale`` (8) times the 95 % bounds its inliers'
+noise leaves (:func:`pose_uncertainty`) must lie within the 1 deg / 0.5 m that fine registration
+starts from. Matches share errors their noise does not show (a rendered LiDAR image against a
+photograph): guesses were 2-9 times their bound off, one 16 times (docs/BENCHMARKS.md 11).
 """
 
 from __future__ import annotations
@@ -113,7 +118,8 @@ class InitialGuess:
     rms_px : float
         RMS reprojection error over the inliers, pixels (NaN without inliers).
     success : bool
-        At least ``min_inliers`` inliers: the pipeline may trust the guess.
+        At least ``min_inliers`` inliers, distinct from rival poses and :attr:`precise`: the
+        pipeline may trust the guess (:attr:`failure` says why not).
     threshold : float
         Inlier threshold, pixels (the RANSAC threshold).
     min_inliers : int
