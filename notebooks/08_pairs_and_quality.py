@@ -107,10 +107,13 @@ print(
 
 # %% [markdown]
 # On synthetic data we can check the check: does the stated bound cover the true error? The
-# curvature describes how *precise* a minimum is, not whether it is the *right* one; on
-# nbcalib's synthetic scenes the bias of the NID minimum (cast shadows in the camera image pull
-# points towards their shadows) is often larger than the bound. docs/BENCHMARKS.md reports how
-# often the bound covers the error over 30+ synthetic pairs.
+# curvature describes how *precise* a minimum is, not whether it is the *right* one: the bias of
+# the NID minimum (cast shadows in the camera image pull points towards their shadows) can be
+# larger. So the bound adds a jackknife over image regions: the minimum moved with each block of
+# regions left out, whose scatter is what such a bias does (times `assess.jackknife_scale`, 8).
+# A bound wider than the limits (`assess.max_translation_uncertainty`, 5 cm) makes the verdict
+# `suspect` ("flat cost"): one small pair can be. docs/BENCHMARKS.md 11 reports how often the
+# bound covers the error over many rigs and real sets.
 
 # %%
 err = pose_errors(result.T_camera_lidar, seq.T_camera_lidar)
