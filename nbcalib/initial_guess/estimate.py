@@ -179,6 +179,18 @@ class InitialGuess:
     max_error_deg: float = math.inf
 
     @property
+    def found(self) -> bool:
+        """Enough inliers and distinct from rival poses: ``success`` without :attr:`precise`.
+
+        What matching asks of an attempt: did its matches find the pose?
+        """
+        return (
+            self.n_inliers >= self.min_inliers
+            and self.support >= self.min_distinctiveness * max(self.runner_up, 1)
+            and self.support >= self.min_shared_distinctiveness * max(self.runner_up_shared, 1)
+        )
+
+    @property
     def precise(self) -> bool:
         """``precision_scale`` times the bounds within ``max_error_m`` and ``max_error_deg``."""
         k = self.precision_scale
@@ -661,16 +673,13 @@ def estimate_initial_guess(
             seed=seed,
             iterations=cfg.translation_iterations,
         )
-    distinct = support >= cfg.min_distinctiveness * max(runner_up, 1) and (
-        support >= cfg.min_shared_distinctiveness * max(runner_up_shared, 1)
-    )
     bound_m, bound_deg = pose_uncertainty(camera, T_final, uv[inliers], points[inliers])
     guess = InitialGuess(
         T_camera_lidar=T_final,
         inliers=inliers,
         errors=errors,
         rms_px=rms,
-        success=n_inliers >= min_inliers and distinct,
+        success=False,  # set below from found and precise
         threshold=float(ransac_threshold),
         min_inliers=min_inliers,
         ransac=ransac,
@@ -688,7 +697,7 @@ def estimate_initial_guess(
         max_error_m=float(cfg.max_start_translation),
         max_error_deg=float(cfg.max_start_rotation_deg),
     )
-    return replace(guess, success=guess.success and guess.precise)
+    return replace(guess, success=guess.found and guess.precise)
 
 
 #: RANSAC rotations beyond :data:`DISTINCT_ROTATION_DEG` tried as the runner-up answer.

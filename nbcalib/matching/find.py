@@ -312,6 +312,6 @@ def _guess_passes(camera, corr: Correspondences, guess_config, seed: int) -> tup
         cfg,
         seed=seed,
         weights=corr.weights if cfg.confidence_weights else None,
-        precision_scale=0.0,  # did this attempt find the pose? (precision is the guess's test)
     )
-    return bool(guess.success), int(guess.support)
+    # did this attempt find the pose? (precision is the initial-guess stage's test)
+    return bool(guess.found), int(guess.support)

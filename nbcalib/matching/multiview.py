@@ -154,20 +154,14 @@ def _refined_view(camera, corr, guess_config, seed, render, match) -> ViewMatche
     from nbcalib.initial_guess.estimate import estimate_initial_guess
 
     try:
-        # the view is rendered from a roughly right pose to make the matches precise: the
-        # success test's precision part (for fine registration's start) does not apply
         guess = estimate_initial_guess(
-            camera,
-            corr.uv_camera,
-            corr.points_lidar,
-            guess_config,
-            weights=corr.weights,
-            seed=seed,
-            precision_scale=0.0,
+            camera, corr.uv_camera, corr.points_lidar, guess_config, weights=corr.weights, seed=seed
         )
     except InputError:
         return None
-    if not guess.success:
+    # the view is rendered from a roughly right pose to make the matches precise: a found pose
+    # is enough, the precision test is for fine registration's start
+    if not guess.found:
         return None
     T = guess.T_camera_lidar
     return match(render(T[:3, :3], T[:3, 3]), fine=True)

@@ -50,9 +50,10 @@ class AssessConfig:
     max_nid : float
         A mean per-pair NID above this means image and LiDAR share almost no information.
     pair_disagreement_quantile : float
-        Pairs disagree when a pair's own optimum lies outside its own uncertainty at the
-        quantile ``1 - (1 - q) / K`` of a chi-square with 6 degrees of freedom (``K`` pairs):
-        with agreeing pairs, the chance that any of them is called elsewhere is below ``1 - q``
+        Pairs disagree when a pair's own optimum lies farther from the other pairs' mean than
+        their uncertainties and a single shot's bias allow, each axis of each of ``K`` pairs
+        tested at ``(1 - q) / (6 K)`` (:func:`~nbcalib.report.quality.pairs_elsewhere`): with
+        agreeing pairs, the chance that any of them is called elsewhere is below ``1 - q``
         whatever ``K``.
     pair_bias_translation, pair_bias_rotation_deg : float
         Standard deviation per axis of a pair's own single-shot bias (the part of its optimum

@@ -893,24 +893,24 @@ def pairs_elsewhere(offsets, own_covariances, bias_floor, quantile: float) -> li
     if n_pairs < 2:
         raise ValueError("the pair test needs at least two pairs")
     upper = 1.0 - 0.5 * (1.0 - quantile) / (6 * n_pairs)
+    m = n_pairs - 1  # the other pairs
+    # candidates for the bias variance per axis, each with the limit of its own precision: the
+    # floor (known: normal), the other pairs' spread pooled over the three axes of a kind
+    # (3 (K - 2) degrees of freedom, so that two pairs agreeing by chance on one axis do not make
+    # a third look far off) and on the axis itself (K - 2: an axis whose pairs scatter more than
+    # the others of its kind); the largest is used
+    limits = np.array([ndtri(upper)] + ([stdtrit(3 * (m - 1), upper), stdtrit(m - 1, upper)]
+                                        if m >= 2 else []))  # fmt: skip
     out = []
     for k in range(n_pairs):
         others = np.delete(offsets, k, axis=0)
-        m = n_pairs - 1
-        # candidates for the bias variance per axis, each with the limit of its own precision:
-        # the floor (known: normal), the other pairs' spread pooled over the three axes of a
-        # kind (3 (K - 2) degrees of freedom, so that two pairs agreeing by chance on one axis
-        # do not make a third look far off) and on the axis itself (K - 2: an axis whose pairs
-        # scatter more than the others of its kind); the largest is used
-        variances, limits = [floor2], [np.full(6, float(ndtri(upper)))]
+        variances = [floor2]
         if m >= 2:
             per_axis = np.var(others, axis=0, ddof=1)
             variances += [np.repeat([per_axis[:3].mean(), per_axis[3:].mean()], 3), per_axis]
-            limits += [np.full(6, float(stdtrit(3 * (m - 1), upper))),
-                       np.full(6, float(stdtrit(m - 1, upper)))]  # fmt: skip
         choice = np.argmax(np.array(variances), axis=0)
         bias = np.choose(choice, variances)
-        limit = np.choose(choice, limits)
+        limit = limits[choice]
         var = own[k] + np.delete(own, k, axis=0).mean(axis=0) / m + bias * (1.0 + 1.0 / m)
         z = np.abs(offsets[k] - others.mean(axis=0)) / np.sqrt(var)
         out.append(float(np.max(z / limit)))
