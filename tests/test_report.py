@@ -244,6 +244,19 @@ def test_the_pair_test_names_a_pair_far_off(n_pairs):
         pairs_elsewhere(x[:1], own[:1], floor, 0.999)
 
 
+def test_the_pair_test_with_no_uncertainty_at_all_flags_any_difference():
+    """Both floors set to 0 and no curvature: identical pairs agree, a different one does not."""
+    from nbcalib.report.quality import pairs_elsewhere
+
+    own = np.zeros((3, 6, 6))
+    same = np.zeros((3, 6))
+    assert pairs_elsewhere(same, own, np.zeros(6), 0.999) == [0.0, 0.0, 0.0]
+    apart = same.copy()
+    apart[2, 0] = 0.01
+    ratios = pairs_elsewhere(apart, own, np.zeros(6), 0.999)
+    assert not np.isnan(ratios).any() and ratios[2] > 1.0, ratios
+
+
 def test_image_regions_add_their_spread_to_the_uncertainty():
     many = make_pair(1, n=24000)
     q = assess([many], np.eye(4))

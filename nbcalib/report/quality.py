@@ -912,7 +912,11 @@ def pairs_elsewhere(offsets, own_covariances, bias_floor, quantile: float) -> li
         bias = np.choose(choice, variances)
         limit = limits[choice]
         var = own[k] + np.delete(own, k, axis=0).mean(axis=0) / m + bias * (1.0 + 1.0 / m)
-        z = np.abs(offsets[k] - others.mean(axis=0)) / np.sqrt(var)
+        residual = np.abs(offsets[k] - others.mean(axis=0))
+        # a zero variance (both floors set to 0, no curvature, pairs identical) makes any
+        # residual infinitely far and none at all agree, rather than a nan that is never flagged
+        with np.errstate(divide="ignore", invalid="ignore"):
+            z = np.where(var > 0.0, residual / np.sqrt(var), np.where(residual > 0.0, np.inf, 0.0))
         out.append(float(np.max(z / limit)))
     return out
 
