@@ -347,7 +347,7 @@ def phase_report(args) -> None:
     """``nbcalib report`` on every calibration without a report of this code version."""
     root = Path(args.out)
     version = code_version()
-    for case in sorted((root / "cases").glob("*")):
+    for case in sorted((root / "cases").glob(args.cases)):
         row_path, out_path = case / "row.json", case / "report.json"
         if not row_path.is_file():
             continue
@@ -648,6 +648,8 @@ def main(argv=None) -> int:
     )
     ap.add_argument("--guess-rigs", type=int, default=240,
                     help="guesses phase: one-pair synthetic rigs (seeds 1000 ..)")  # fmt: skip
+    ap.add_argument("--cases", default="*", metavar="GLOB",
+                    help="report phase: only the cases whose folder matches (real_*: real data)")
     ap.add_argument("--rejudge", nargs="*", metavar="KEY=VALUE",
                     help="analyse: judge the stored reports again with AssessConfig settings "
                     "(tuning; the figures that count come from nbcalib report)")  # fmt: skip

@@ -171,8 +171,9 @@ def test_uncertainty_shrinks_with_more_pairs(pair, quality_at_truth):
 
 
 def test_rejudge_scales_the_intervals(quality_at_truth):
-    q1 = rejudge(quality_at_truth, AssessConfig(scale=1.0))
-    q4 = rejudge(quality_at_truth, AssessConfig(scale=4.0))
+    # the curvature part alone (the restarts' part has its own scale)
+    q1 = rejudge(quality_at_truth, AssessConfig(scale=1.0, restarts=0))
+    q4 = rejudge(quality_at_truth, AssessConfig(scale=4.0, restarts=0))
     u1, u4 = q1.uncertainty, q4.uncertainty
     np.testing.assert_allclose(q4.sigma, 2.0 * q1.sigma, **TOL["report_rescaled_sigma"])
     np.testing.assert_allclose(
@@ -722,3 +723,50 @@ def test_the_parallel_kernels_give_the_report_of_the_serial_ones(
     np.testing.assert_allclose(q.hessian, serial.hessian, rtol=1e-8, atol=1e-9)
     for key in ("translation_total_cm", "rotation_total_deg"):
         assert q.uncertainty[key] == pytest.approx(serial.uncertainty[key], rel=1e-8)
+
+
+# ------------------------------------------------------------------------------ restarts
+
+
+def test_restart_starts_are_exactly_the_stated_distance_away():
+    from nbcalib.report.quality import restart_starts
+    from nbcalib.transforms import invert_T, pose_error
+
+    T = se3_exp([0.1, -0.2, 0.3, 0.2, -0.1, 0.05])
+    starts = restart_starts(T, 5, 0.05, 1.0)
+    assert len(starts) == 5
+    for T0 in starts:
+        dt, dr = pose_error(invert_T(T0), invert_T(T))
+        assert dt == pytest.approx(0.05, abs=1e-9) and dr == pytest.approx(1.0, abs=1e-9)
+    again = restart_starts(T, 5, 0.05, 1.0)  # seeded: the same result, the same starts
+    np.testing.assert_array_equal(np.array(starts), np.array(again))
+
+
+def test_restarts_at_a_well_posed_result_come_back_and_stay_ok(quality_at_truth):
+    q = quality_at_truth
+    assert q.restart_offsets.shape == (AssessConfig().restarts, 6)
+    # a textured synthetic pair has one minimum: every restart ends where the result is
+    assert np.degrees(np.linalg.norm(q.restart_offsets[:, 3:], axis=1)).max() < 0.05
+    assert np.linalg.norm(q.restart_offsets[:, :3], axis=1).max() < 0.005
+    assert q.verdict == "ok" and "restarts" in q.uncertainty["method"]
+
+
+def test_restarts_that_end_elsewhere_widen_the_interval_and_make_it_suspect(quality_at_truth):
+    c = AssessConfig()
+    base = rejudge(quality_at_truth, replace(c, restarts=0))
+    assert base.verdict == "ok" and "restarts" not in base.uncertainty["method"]
+    ends = np.zeros((4, 6))
+    ends[:, 4] = np.radians([0.5, -0.4, 0.6, 0.3])  # a shallow minimum per start, about y
+    ends[:, 0] = [0.02, -0.03, 0.01, 0.04]
+    moved = replace(quality_at_truth, restart_offsets=ends)
+    q = rejudge(moved, c)
+    # their spread joins the covariance, times restart_scale
+    added = c.restart_scale * (ends**2).mean(axis=0)
+    np.testing.assert_allclose(q.sigma**2 - base.sigma**2, added, rtol=1e-9, atol=1e-15)
+    assert q.verdict == "suspect"
+    assert any("depends on where registration starts" in r for r in q.reasons), q.reasons
+    assert any("--init" in s for s in q.next_steps)
+    # a median end within the limit is no reason; restarts=0 judges as if there were none
+    near = replace(quality_at_truth, restart_offsets=ends * 0.1)
+    assert not any("registration starts" in r for r in rejudge(near, c).reasons)
+    assert rejudge(moved, replace(c, restarts=0)).verdict == "ok"
