@@ -23,6 +23,7 @@ EPILOG = """\
 examples:
   nbcalib report work/
   nbcalib report work/ --confidence 0.99
+  nbcalib report work/ --restarts 0     # faster: no restarts around the result
   nbcalib calibrate work/ && nbcalib report work/ --strict || echo "check the result"
 """
 
