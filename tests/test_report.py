@@ -770,3 +770,9 @@ def test_restarts_that_end_elsewhere_widen_the_interval_and_make_it_suspect(qual
     near = replace(quality_at_truth, restart_offsets=ends * 0.1)
     assert not any("registration starts" in r for r in rejudge(near, c).reasons)
     assert rejudge(moved, replace(c, restarts=0)).verdict == "ok"
+
+
+def test_several_pairs_are_not_restarted():
+    """Their own spread measures a shot's bias; restarting many pairs would cost minutes."""
+    q = assess([make_pair(1, name="a"), make_pair(2, name="b")], np.eye(4))
+    assert q.restart_offsets.shape == (0, 6) and "restarts" not in q.uncertainty["method"]

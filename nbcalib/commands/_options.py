@@ -247,9 +247,10 @@ REFINE = (
 ASSESS = (
     Option("--confidence", "assess.confidence", "confidence of the stated intervals", "P"),
     Option("--restarts", "assess.restarts",
-           "run fine registration again from N starts 1 deg / 5 cm around the result: their "
-           "spread joins the uncertainty, and ends far from the result make it suspect "
-           "(0: none, faster, but a real single shot's uncertainty is then understated)", "N"),
+           "for a single pair, run fine registration again from N starts 1 deg / 5 cm around "
+           "the result: their spread joins the uncertainty, and ends far from the result make "
+           "it suspect (0: none, faster, but a real single shot's uncertainty is then "
+           "understated; several pairs: none, their own spread counts)", "N"),
 )  # fmt: skip
 
 #: Every option that sets a setting, by flag.

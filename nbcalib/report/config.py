@@ -67,7 +67,9 @@ class AssessConfig:
     jackknife_scale : float
         Variance scale of the jackknife part (1: the jackknife as it is).
     restarts : int
-        Fine registration is run again from this many starts around the result (0: none;
+        For a single pair, fine registration is run again from this many starts around the
+        result (0: none; with two or more pairs none either: their own spread measures a shot's
+        bias;
         :mod:`nbcalib.report.quality`); where they end adds to the uncertainty, and a median
         end far from the result in rotation makes it suspect.
     restart_translation, restart_rotation_deg : float

@@ -46,12 +46,14 @@ spread when there are three or more), a false-alarm rate that does not grow with
 **Uncertainty: where registration ends from elsewhere.** A real single shot's cost has shallow
 minima within a degree of each other; which one fine registration finds depends on its start,
 and neither the curvature nor the jackknife at the result sees the others. Fine registration is
-run again from :attr:`AssessConfig.restarts` starts around the result (:func:`restart_starts`:
+run again, for a single pair, from :attr:`AssessConfig.restarts` starts around the result (:func:`restart_starts`:
 turned by exactly ``restart_rotation_deg``, moved by exactly ``restart_translation``, seeded
 directions); ``restart_scale`` times the mean outer product of where they end
 (:attr:`Quality.restart_offsets`) joins the covariance, and a median end farther than
 ``max_restart_rotation_deg`` in rotation makes the result suspect. Synthetic pairs' restarts come
-back to within 0.3 cm / 0.01 deg; real ones end centimetres and tenths of a degree away.
+back to within 0.3 cm / 0.01 deg; real ones end centimetres and tenths of a degree away. With
+two or more pairs there are no restarts: the pairs' own spread (the jackknife over their regions,
+the pair test) measures the bias of a shot, and restarting many pairs would cost minutes.
 
 **Move from the start.** Fine registration may not leave its trust region around the start
 (:attr:`RefineConfig.trust_translation <nbcalib.registration.config.RefineConfig>`,
@@ -491,7 +493,10 @@ def assess(
 
         curve_offsets, curve_values = _curves(costs, T, acfg, step)
         restart_offsets = np.zeros((0, 6))
-        if acfg.restarts and sum(visible) > 0:
+        # a single shot only: with two or more pairs their own spread (the jackknife over
+        # their regions, the pair test) measures the shot-to-shot bias that restarts find, and
+        # restarting a many-pair job costs minutes (a 2-pair Livox report 15 -> 117 s)
+        if acfg.restarts and len(pairs) == 1 and sum(visible) > 0:
             restart_offsets = _restart_offsets(pairs, T, config or RefineConfig(), acfg, step)
     init_change = None
     if T_init is not None:
