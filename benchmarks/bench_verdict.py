@@ -648,8 +648,12 @@ def main(argv=None) -> int:
     )
     ap.add_argument("--guess-rigs", type=int, default=240,
                     help="guesses phase: one-pair synthetic rigs (seeds 1000 ..)")  # fmt: skip
-    ap.add_argument("--cases", default="*", metavar="GLOB",
-                    help="report phase: only the cases whose folder matches (real_*: real data)")
+    ap.add_argument(
+        "--cases",
+        default="*",
+        metavar="GLOB",
+        help="report phase: only the cases whose folder matches (real_*: real data)",
+    )
     ap.add_argument("--rejudge", nargs="*", metavar="KEY=VALUE",
                     help="analyse: judge the stored reports again with AssessConfig settings "
                     "(tuning; the figures that count come from nbcalib report)")  # fmt: skip

@@ -68,10 +68,9 @@ class AssessConfig:
         Variance scale of the jackknife part (1: the jackknife as it is).
     restarts : int
         For a single pair, fine registration is run again from this many starts around the
-        result (0: none; with two or more pairs none either: their own spread measures a shot's
-        bias;
-        :mod:`nbcalib.report.quality`); where they end adds to the uncertainty, and a median
-        end far from the result in rotation makes it suspect.
+        result (0: none; :mod:`nbcalib.report.quality`); where they end adds to the
+        uncertainty, and a median end far from the result in rotation makes it suspect. With
+        two or more pairs there are none: their own spread measures a shot's bias.
     restart_translation, restart_rotation_deg : float
         How far each restart starts from the result: its camera centre moved by exactly this
         many metres, its rotation turned by exactly this many degrees (random directions).
@@ -121,10 +120,11 @@ class AssessConfig:
     # restarts from 1 deg / 5 cm end a median 4.4 cm / 0.18 deg from a result within
     # 0.3 deg / 5 cm of the reference and 5.1 cm / 0.82 deg from one beyond 1 deg / 10 cm;
     # on synthetic pairs they come back to within 0.3 cm / 0.01 deg. restart_scale: the least
-    # of 1, 2, 3 whose real tune half is covered at >= 93 % per axis (88.4, 91.6, 93.3 %; the
-    # check half 94.3 %). max_restart_rotation_deg: the largest of 0.1, 0.15, ... 0.3 that
-    # calls no tune result beyond 1 deg / 10 cm ok (its least median end is 0.22 deg); the
-    # check half: 0 of 26 such results under it (docs/BENCHMARKS.md 11)
+    # of 1, 2, 3 whose real tune half is covered at >= 93 % per axis (through the CLI: 89.8,
+    # 92.2, 93.8 %; the check half 93.9 %, 73.0 % without restarts). max_restart_rotation_deg:
+    # the largest of 0.1, 0.15, ... 0.3 that calls no tune result beyond 1 deg / 10 cm ok (its
+    # least median end is 0.22 deg); the check half: 0 of 26 such results under it
+    # (docs/BENCHMARKS.md 11)
     restarts: int = 4
     restart_translation: float = 0.05
     restart_rotation_deg: float = 1.0

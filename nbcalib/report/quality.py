@@ -46,12 +46,13 @@ spread when there are three or more), a false-alarm rate that does not grow with
 **Uncertainty: where registration ends from elsewhere.** A real single shot's cost has shallow
 minima within a degree of each other; which one fine registration finds depends on its start,
 and neither the curvature nor the jackknife at the result sees the others. Fine registration is
-run again, for a single pair, from :attr:`AssessConfig.restarts` starts around the result (:func:`restart_starts`:
-turned by exactly ``restart_rotation_deg``, moved by exactly ``restart_translation``, seeded
-directions); ``restart_scale`` times the mean outer product of where they end
-(:attr:`Quality.restart_offsets`) joins the covariance, and a median end farther than
-``max_restart_rotation_deg`` in rotation makes the result suspect. Synthetic pairs' restarts come
-back to within 0.3 cm / 0.01 deg; real ones end centimetres and tenths of a degree away. With
+run again, for a single pair, from :attr:`AssessConfig.restarts` starts around the result
+(:func:`restart_starts`: turned by exactly ``restart_rotation_deg``, moved by exactly
+``restart_translation``, seeded directions); ``restart_scale`` times the mean outer product of
+where they end (:attr:`Quality.restart_offsets`) joins the covariance, and a median end farther
+than ``max_restart_rotation_deg`` in rotation makes the result suspect. Synthetic pairs'
+restarts come back to within 0.3 cm / 0.01 deg; real ones end centimetres and tenths of a degree
+away. With
 two or more pairs there are no restarts: the pairs' own spread (the jackknife over their regions,
 the pair test) measures the bias of a shot, and restarting many pairs would cost minutes.
 
@@ -444,7 +445,11 @@ def assess(
     T = validate_T(np.asarray(T_camera_lidar, dtype=np.float64), "T_camera_lidar")
     steps = np.array([acfg.hessian_translation] * 3 + [math.radians(acfg.hessian_rotation_deg)] * 3)
 
-    with Progress(len(pairs) + 6 + acfg.restarts, "quality", enabled=progress is True) as display:
+    # a single shot only: with two or more pairs their own spread (the jackknife over their
+    # regions, the pair test) measures the shot-to-shot bias that restarts find, and restarting
+    # a many-pair job costs minutes (a 2-pair Livox report 15 -> 117 s)
+    n_restarts = acfg.restarts if len(pairs) == 1 else 0
+    with Progress(len(pairs) + 6 + n_restarts, "quality", enabled=progress is True) as display:
 
         def step(what: str) -> None:
             if callable(progress):
@@ -493,10 +498,7 @@ def assess(
 
         curve_offsets, curve_values = _curves(costs, T, acfg, step)
         restart_offsets = np.zeros((0, 6))
-        # a single shot only: with two or more pairs their own spread (the jackknife over
-        # their regions, the pair test) measures the shot-to-shot bias that restarts find, and
-        # restarting a many-pair job costs minutes (a 2-pair Livox report 15 -> 117 s)
-        if acfg.restarts and len(pairs) == 1 and sum(visible) > 0:
+        if n_restarts and sum(visible) > 0:
             restart_offsets = _restart_offsets(pairs, T, config or RefineConfig(), acfg, step)
     init_change = None
     if T_init is not None:
@@ -642,8 +644,11 @@ RESTART_SEED = 29
 
 
 def restart_starts(T_camera_lidar: np.ndarray, count: int, distance: float, angle_deg: float):
-    """``count`` starts around a pose, each turned by exactly ``angle_deg`` about a random axis
-    and its camera centre moved by exactly ``distance`` in a random direction (seeded)."""
+    """``count`` starts around a pose ``T_camera_lidar`` (seeded: always the same ones).
+
+    Each is turned by exactly ``angle_deg`` about a random axis and its camera centre moved by
+    exactly ``distance`` metres in a random direction.
+    """
     rng = np.random.default_rng(RESTART_SEED)
     T_lidar_camera = invert_T(T_camera_lidar)
     starts = []
@@ -657,9 +662,9 @@ def restart_starts(T_camera_lidar: np.ndarray, count: int, distance: float, angl
 
 
 def _restart_offsets(pairs, T: np.ndarray, config: RefineConfig, acfg: AssessConfig, step):
-    """Fine registration again from :func:`restart_starts` around the result: where each ends,
-    ``delta`` (R, 6) with ``exp(delta) @ T`` the end.
+    """Where fine registration ends from :func:`restart_starts` around the result ``T``.
 
+    Returns ``delta`` (R, 6) per restart, with ``exp(delta) @ T`` its end.
     On a synthetic pair the restarts come back to within 0.3 cm / 0.01 deg; on real pairs the
     single shot's cost has several shallow minima within a degree and the ends scatter by
     centimetres and tenths of a degree (docs/BENCHMARKS.md 11), a spread that neither the
