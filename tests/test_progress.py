@@ -200,8 +200,10 @@ def test_assess_and_refine_show_their_steps(caplog, every_step):
     pair = make_pair(1, n=2000, name="a")
     assess([pair], np.eye(4), progress=True)
     steps = [line.split(",")[0] for line in _lines(caplog)]
-    assert steps[:2] == ["quality: 1/7 Hessian of a", "quality: 2/7 NID curve tx"]
-    assert steps[-2:] == ["quality: 6/7 NID curve ry", "quality: 7/7 NID curve rz"]
+    # a pair's Hessian, six curves, then (a single pair) four restarts around the result
+    assert steps[:2] == ["quality: 1/11 Hessian of a", "quality: 2/11 NID curve tx"]
+    assert steps[6:8] == ["quality: 7/11 NID curve rz", "quality: 8/11 restart 1 of 4"]
+    assert steps[-1] == "quality: 11/11 restart 4 of 4"
     caplog.clear()
     config = RefineConfig(pyramid_levels=0, max_outer=2, optimizer="lbfgs")
     result = refine([pair], np.eye(4), config, progress=True)
