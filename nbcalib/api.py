@@ -12,7 +12,6 @@ can then continue).
 
 from __future__ import annotations
 
-import logging
 import os
 from collections.abc import Callable
 from dataclasses import dataclass, fields
@@ -22,6 +21,8 @@ import numpy as np
 
 from nbcalib.errors import InputError
 from nbcalib.products import CalibrationResult
+from nbcalib.progress import api_output
+from nbcalib.warmup import compiling_note
 
 __all__ = ["ArrayInputs", "CalibrationResult", "calibrate"]
 
@@ -168,6 +169,7 @@ def calibrate(
     workdir: str | os.PathLike | None = None,
     config=None,
     model_dir: str | os.PathLike | None = None,
+    progress: bool | None = None,
     log: Callable[[str], None] | None = None,
     **settings,
 ) -> CalibrationResult:
@@ -197,8 +199,15 @@ def calibrate(
         Every setting (:mod:`nbcalib.config`); default: the defaults.
     model_dir : str or os.PathLike, optional
         Exported matcher models (default: ``$NBCALIB_MODEL_DIR`` or the user cache).
+    progress : bool, optional
+        Show the progress as the command line does: a line per stage and a bar for each long
+        step, in a notebook as text outputs that update in place, on a terminal on standard
+        error. By default (None) it is shown in a notebook or on a terminal unless logging was
+        configured (a level for the ``nbcalib`` logger, or a handler such as
+        ``logging.basicConfig``'s: then the lines go to that log). True: shown on standard error
+        also when it is not a terminal; False: nothing.
     log : callable, optional
-        Receives the pipeline's progress lines (default: the ``nbcalib`` logger only).
+        Receives each progress line instead (``log=print``, ``log=lines.append``).
     **settings
         Settings by their name in the config (``voxel_size=0.01``, ``matcher="sift"``,
         ``optimizer="lbfgs"``, ``bins=16``, ``max_outer=5``, ``seed=3``...): any field of a
@@ -243,27 +252,6 @@ def calibrate(
     if T_init is not None and not isinstance(T_init, Start):
         start = Start.from_matrix(T_init, "T_init")
     calibrator = Calibrator(config, workdir=workdir, model_dir=model_dir)
-    handler = _Forward(log) if log is not None else None
-    logger = logging.getLogger("nbcalib")
-    level = logger.level
-    if handler is not None:
-        logger.addHandler(handler)
-        logger.setLevel(logging.INFO)
-    try:
-        result = calibrator.run(ArrayInputs(clouds, values, images, camera), init=start)
-    finally:
-        if handler is not None:
-            logger.removeHandler(handler)
-            logger.setLevel(level)
-    return result
-
-
-class _Forward(logging.Handler):
-    """Pass the pipeline's log lines to a callable."""
-
-    def __init__(self, log: Callable[[str], None]):
-        super().__init__(logging.INFO)
-        self.log = log
-
-    def emit(self, record: logging.LogRecord) -> None:
-        self.log(record.getMessage())
+    with api_output(progress, log):
+        compiling_note()
+        return calibrator.run(ArrayInputs(clouds, values, images, camera), init=start)

@@ -1,10 +1,11 @@
 """What the teaching notebooks (``notebooks/``) share: their quick mode and their 3-D views.
 
-The notebooks' 3-D views (pyvista, from ``nbcalib[notebooks]``) can be turned in JupyterLab,
-through pyvista's notebook backend, on a desktop or on a server. In the tests and CI (the quick
-mode), and in scripts where no window can open, a view is rendered off screen and shown as a
-still image with matplotlib, so that it appears in the outputs like any other figure. Without
-a display, VTK renders through its EGL window, which needs only Mesa's ``libegl1`` and
+The notebooks' 3-D views (pyvista, from ``nbcalib[notebooks]``) are always shown as a still
+image (a matplotlib figure of the off-screen render), so they stay in a saved, executed or
+shared notebook like any other figure, and reach a browser through any tunnel. In a Jupyter
+kernel, where the kernel can serve one (:func:`live_views`), a view to turn (pyvista's trame
+widget) is shown beside it. On a desktop outside Jupyter the view opens in a window. Without a
+display, VTK renders through its EGL window, which needs only Mesa's ``libegl1`` and
 ``libgl1-mesa-dri`` (no X server, no Xvfb).
 
     from nbcalib.teaching import is_quick, plotter, show
@@ -13,7 +14,7 @@ a display, VTK renders through its EGL window, which needs only Mesa's ``libegl1
     pl = plotter()                  # None (and a message) when pyvista is not installed
     if pl is not None:
         pl.add_points(points, scalars=intensities)
-        image = show(pl, "the dense cloud")   # the rendered RGB image, or None when interactive
+        image = show(pl, "the dense cloud")   # the rendered RGB image, or None in a window
 """
 
 from __future__ import annotations
@@ -24,16 +25,20 @@ from pathlib import Path
 
 import numpy as np
 
+from nbcalib.progress import in_jupyter
+
 __all__ = [
     "egl_available",
     "has_display",
     "in_jupyter",
     "is_quick",
+    "live_views",
     "nbcalib_command",
     "off_screen",
     "plotter",
     "real_data_dir",
     "show",
+    "work_folder",
 ]
 
 
@@ -58,42 +63,70 @@ def real_data_dir() -> Path:
     return next((c for c in candidates if c.is_dir()), candidates[0])
 
 
+def work_folder(name: str) -> Path:
+    """An empty folder ``work/NAME`` where the notebook runs, for what it writes.
+
+    In JupyterLab a notebook runs in its own folder, so the work directories and reports it
+    writes are in ``notebooks/work/NAME`` (ignored by git), where the lab's file browser opens
+    them. Emptied first: each run starts afresh and the last run's files never pile up.
+    """
+    import shutil
+
+    folder = Path("work", name)
+    if folder.exists():
+        shutil.rmtree(folder)
+    folder.mkdir(parents=True)
+    return folder
+
+
+class _Through:
+    """Writes through to a stream (at once, so the order is kept) and keeps a copy."""
+
+    def __init__(self, stream):
+        self.stream, self.parts = stream, []
+
+    def write(self, text: str) -> int:
+        self.parts.append(text)
+        return self.stream.write(text)
+
+    def flush(self) -> None:
+        self.stream.flush()
+
+    def isatty(self) -> bool:
+        return False
+
+
 def nbcalib_command(*words) -> tuple[int, str]:
     """Run ``nbcalib WORDS`` as typed in a terminal, in this process; print it and its output.
 
-    What a terminal shows: the command line, then what it prints (its progress lines go to
-    stderr as in a terminal), and the exit status when it is not 0. Returns ``(status,
-    stdout)``. The ``nbcalib`` logger is left as it was found.
+    What a terminal shows, in the order it happens: the command line, then what the command
+    prints and its progress, then the exit status when it is not 0. In a notebook the progress
+    (the command's standard error) is shown with the rest as plain output, its bars as text
+    updated in place, not as error-coloured blocks. Returns ``(status, stdout)``. The
+    ``nbcalib`` logger is left as it was found.
     """
     import contextlib
-    import io
     import logging
     import shlex
 
     from nbcalib.cli import main
 
     words = [str(w) for w in words]
-    print("$ nbcalib", shlex.join(words))
-    out = io.StringIO()
+    print("$ nbcalib", shlex.join(words), flush=True)
+    out = _Through(sys.stdout)
+    errors = sys.stdout if in_jupyter() else sys.stderr
     logger = logging.getLogger("nbcalib")
     handlers, level = list(logger.handlers), logger.level
     try:
-        with contextlib.redirect_stdout(out):
+        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(errors):
             status = main(words)
     finally:
         logger.handlers[:] = handlers
         logger.setLevel(level)
-    text = out.getvalue()
-    print(text, end="" if text.endswith("\n") or not text else "\n")
+    sys.stdout.flush()
     if status:
         print(f"(exit status {status})")
-    return status, text
-
-
-def in_jupyter() -> bool:
-    """Whether this code runs in a Jupyter kernel (JupyterLab, Notebook, VS Code notebooks)."""
-    shell = sys.modules.get("IPython") and sys.modules["IPython"].get_ipython()
-    return type(shell).__name__ == "ZMQInteractiveShell"
+    return status, "".join(out.parts)
 
 
 def has_display() -> bool:
@@ -104,16 +137,45 @@ def has_display() -> bool:
 
 
 def off_screen() -> bool:
-    """Whether 3-D views become still images rather than views you can turn.
+    """Whether 3-D views render off screen (a still image) rather than in a window.
 
-    Still images under the quick mode or with ``PYVISTA_OFF_SCREEN=true`` (the tests, CI), and
-    outside Jupyter where no window can open (a script on a server). In a Jupyter kernel the
-    view is interactive (pyvista's notebook backend: trame, from ``nbcalib[notebooks]``), also
-    on a server without a display; on a desktop outside Jupyter it opens a window.
+    Off screen in a Jupyter kernel (the still image, and beside it the live view of
+    :func:`live_views`), under the quick mode or with ``PYVISTA_OFF_SCREEN=true`` (the tests,
+    CI), and where no window can open (a script on a server). A window on a desktop outside
+    Jupyter.
     """
     if is_quick() or os.environ.get("PYVISTA_OFF_SCREEN", "").lower() == "true":
         return True
-    return not in_jupyter() and not has_display()
+    return in_jupyter() or not has_display()
+
+
+def live_views() -> bool:
+    """Whether a 3-D view in a notebook gets a view to turn beside its still image.
+
+    ``NBCALIB_3D=image``: never; ``NBCALIB_3D=live``: always. By default (``auto``) where the
+    kernel can serve one: in a Jupyter kernel, not in the quick mode, with pyvista's trame
+    backend installed (``nbcalib[notebooks]``), and either a browser on this machine (no
+    ``SSH_CONNECTION``) or pyvista set to reach its view through the Jupyter server
+    (``PYVISTA_TRAME_SERVER_PROXY_PREFIX``, set by hand for a JupyterLab behind an SSH tunnel;
+    on JupyterHub pyvista sets it itself), which needs ``jupyter-server-proxy``. The live view
+    lives in its kernel: in a saved notebook opened later only the still image is left.
+    """
+    setting = os.environ.get("NBCALIB_3D", "auto").lower()
+    if setting in ("image", "live"):
+        return setting == "live"
+    if not in_jupyter() or is_quick() or os.environ.get("PYVISTA_OFF_SCREEN", "") == "true":
+        return False
+    import importlib.util
+
+    if importlib.util.find_spec("trame") is None:
+        return False
+    proxied = bool(
+        os.environ.get("PYVISTA_TRAME_SERVER_PROXY_PREFIX")
+        or os.environ.get("JUPYTERHUB_SERVICE_PREFIX")
+    )
+    if proxied:
+        return importlib.util.find_spec("jupyter_server_proxy") is not None
+    return not os.environ.get("SSH_CONNECTION")
 
 
 def egl_available() -> bool:
@@ -148,23 +210,32 @@ def plotter(window_size=(900, 600), **kwargs):
             )
             return None
         os.environ.setdefault("VTK_DEFAULT_OPENGL_WINDOW", "vtkEGLRenderWindow")
-    notebook = in_jupyter() and not still
-    pl = pv.Plotter(off_screen=still, notebook=notebook, window_size=list(window_size), **kwargs)
-    pl._nbcalib_still = still  # what show() does with it
+    live = live_views()
+    pl = pv.Plotter(off_screen=still, notebook=live, window_size=list(window_size), **kwargs)
+    pl._nbcalib_still, pl._nbcalib_live = still, live  # what show() does with it
     return pl
 
 
-def show(pl, title: str | None = None) -> np.ndarray | None:
-    """Show a plotter from :func:`plotter`: a view to turn, or a still matplotlib figure.
+#: The text a saved notebook keeps of a live view where no widget can be drawn.
+LIVE_VIEW_TEXT = "(a 3-D view to turn: it needs its kernel; the still image above is the same view)"
 
-    Returns the rendered (H, W, 3) uint8 image when still (the notebooks' tests check that it
-    is not blank), None when the view is interactive (a notebook widget or a window).
+
+def show(pl, title: str | None = None) -> np.ndarray | None:
+    """Show a plotter from :func:`plotter`: a still image, and a view to turn where one can be.
+
+    The still image is a matplotlib figure of the off-screen render: in a notebook it is shown
+    at once (before what the cell prints next) and closed, so it is saved with the notebook;
+    in a script it stays open like the script's other figures. In a notebook with
+    :func:`live_views`, pyvista's view to turn follows it. On a desktop outside Jupyter the
+    view opens in a window instead.
+
+    Returns the rendered (H, W, 3) uint8 image (the notebooks' tests check that it is not
+    blank); None when the view opened in a window.
     """
     if not getattr(pl, "_nbcalib_still", pl.off_screen):
         pl.show(title=title)
         return None
     image = np.asarray(pl.screenshot(return_img=True))
-    pl.close()
     import matplotlib.pyplot as plt
 
     height, width = image.shape[:2]
@@ -174,4 +245,16 @@ def show(pl, title: str | None = None) -> np.ndarray | None:
     if title:
         ax.set_title(title)
     fig.tight_layout()
+    if in_jupyter():
+        from IPython.display import display
+
+        display(fig, metadata={"nbcalib": {"view": "3-D", "title": title or ""}})
+        plt.close(fig)
+        if getattr(pl, "_nbcalib_live", False):
+            widget = pl.show(jupyter_backend="trame", return_viewer=True)
+            bundle = widget._repr_mimebundle_()
+            bundle = bundle[0] if isinstance(bundle, tuple) else bundle
+            display({**bundle, "text/plain": LIVE_VIEW_TEXT}, raw=True)
+            return image
+    pl.close()
     return image

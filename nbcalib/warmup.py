@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["cache_is_warm", "start", "tiny_job"]
+__all__ = ["cache_is_warm", "compiling_note", "start", "tiny_job"]
 
 log = logging.getLogger("nbcalib.warmup")
 
@@ -43,6 +43,24 @@ def cache_is_warm() -> bool:
     if custom:
         return any(Path(custom).rglob(pattern))
     return any((Path(__file__).parent / "kernels" / "__pycache__").glob(pattern))
+
+
+#: What a first run says before its kernels compile (measured: BENCHMARKS.md, "Cold start").
+COMPILING_NOTE = (
+    "first run on this machine: numba compiles nbcalib's kernels as they are first used, "
+    "about 40 s in all on two cores, once (later runs load them from the cache)"
+)
+
+
+def compiling_note() -> bool:
+    """Say (an INFO line of ``nbcalib.warmup``) that kernels will compile, when the cache is cold.
+
+    Returns whether it was said.
+    """
+    if cache_is_warm():
+        return False
+    log.info(COMPILING_NOTE)
+    return True
 
 
 def _cache_writable() -> bool:

@@ -1,7 +1,8 @@
 # ---
 # jupyter:
 #   jupytext:
-#     formats: py:percent
+#     formats: ipynb,py:percent
+#     notebook_metadata_filter: -jupytext.text_representation
 #   kernelspec:
 #     display_name: Python 3
 #     language: python
@@ -28,7 +29,6 @@
 
 # %%
 import json
-from pathlib import Path
 
 import matplotlib.pyplot as plt
 import numpy as np
@@ -37,7 +37,7 @@ from scipy.linalg import logm
 from nbcalib.io.calib_json import read_calib_json, write_calib_json
 from nbcalib.reference import lie as reference
 from nbcalib.synthetic import RigConfig, generate_sequence
-from nbcalib.teaching import is_quick, plotter, show
+from nbcalib.teaching import is_quick, plotter, show, work_folder
 from nbcalib.transforms import (
     invert_T,
     make_T,
@@ -290,8 +290,7 @@ print(f"read as wxyz by mistake, the rotation is {wxyz_mistake_deg:.0f} deg off"
 # `CalibFile.set_T_camera_lidar` writes the inverse, `get_T_camera_lidar` reads it back.
 
 # %%
-work = Path("frames_and_transforms_work").resolve()  # in the working directory
-work.mkdir(exist_ok=True)
+work = work_folder("00_frames_and_transforms").resolve()  # notebooks/work/00_..., emptied
 calib = make_calib(seq.camera, ["pair_000"])  # a fresh calib.json, as nbcalib preprocess makes
 calib.set_T_camera_lidar("T_lidar_camera", T_camera_lidar)
 write_calib_json(work / "calib.json", calib)
@@ -507,7 +506,7 @@ for ax, (label, (uv_k, valid_k)) in zip(axes.ravel(), overlays.items()):
     )
     ax.set_axis_off()
 fig.suptitle("LiDAR points coloured by range over the camera image")
-fig.colorbar(dots, ax=axes, shrink=0.6, label="range from the LiDAR [m]")
+colorbar = fig.colorbar(dots, ax=axes, shrink=0.6, label="range from the LiDAR [m]")
 
 # %% [markdown]
 # ## Take-aways

@@ -1,7 +1,8 @@
 # ---
 # jupyter:
 #   jupytext:
-#     formats: py:percent
+#     formats: ipynb,py:percent
+#     notebook_metadata_filter: -jupytext.text_representation
 #   kernelspec:
 #     display_name: Python 3
 #     language: python
@@ -41,7 +42,7 @@ from nbcalib.io.pointcloud2 import pointcloud2_to_fields
 from nbcalib.preprocess.intensity import equalize_point_intensities
 from nbcalib.synthetic import RigConfig, generate_sequence
 from nbcalib.synthetic.writer import BASE_STAMP_NS, TOPICS, export_dataset, write_sequence_bag
-from nbcalib.teaching import is_quick, plotter, real_data_dir, show
+from nbcalib.teaching import is_quick, plotter, real_data_dir, show, work_folder
 from nbcalib.transforms import transform_points
 
 QUICK = is_quick()  # smaller data when the test suite runs the notebooks
@@ -73,7 +74,7 @@ config = RigConfig(
     duration=0.3 if QUICK else 1.0,
     image_size=(640, 480) if QUICK else (1280, 960),
 )
-recording = Path("lidar_data_recording").resolve()  # in the working directory
+recording = work_folder("02_lidar_data").resolve()  # notebooks/work/02_lidar_data, emptied
 truth = export_dataset(config, recording / "files", fmt="files")
 for path in sorted((recording / "files").rglob("*")):
     if path.is_file():
@@ -421,7 +422,7 @@ for row, (label, hist, edges) in enumerate(
     axes[row, 1].set_xlabel("firing column (azimuth 180 deg at 0, clockwise)")
     axes[row, 1].set_ylabel("ring")
     axes[row, 1].set_title(f"scan 0, ring x column, {label} intensity (blue: no return)")
-fig.colorbar(shown, ax=axes[:, 1], label="intensity (raw / 255, or equalised)")
+colorbar = fig.colorbar(shown, ax=axes[:, 1], label="intensity (raw / 255, or equalised)")
 
 # %% [markdown]
 # ## Does the recording line up with its ground truth?

@@ -1,7 +1,8 @@
 # ---
 # jupyter:
 #   jupytext:
-#     formats: py:percent
+#     formats: ipynb,py:percent
+#     notebook_metadata_filter: -jupytext.text_representation
 #   kernelspec:
 #     display_name: Python 3
 #     language: python
@@ -191,7 +192,7 @@ axes[0].legend(loc="lower left")
 axes[1].set_xlim(*zoom_u)
 axes[1].set_ylim(zoom_v[1], zoom_v[0])
 axes[1].set_title("close-up (orange box): all kept points")
-fig.colorbar(sc, ax=axes, label="range from the camera [m]", shrink=0.8)
+colorbar = fig.colorbar(sc, ax=axes, label="range from the camera [m]", shrink=0.8)
 
 # %% [markdown]
 # The removed points lie on the surfaces *behind* the objects in front, along the objects'
@@ -491,7 +492,7 @@ for column, (label, T, err) in enumerate(
     axes[0, column].set_title(title)
     sc = overlay(axes[1, column], T, zoom=crop)
     axes[1, column].set_title(f"{label}, close-up (white box)")
-fig.colorbar(sc, ax=axes, label="range from the camera [m]", shrink=0.6)
+colorbar = fig.colorbar(sc, ax=axes, label="range from the camera [m]", shrink=0.6)
 
 # %% [markdown]
 # At the start the points of the signpost float to one side of its image and the wall's

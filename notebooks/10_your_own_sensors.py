@@ -1,7 +1,8 @@
 # ---
 # jupyter:
 #   jupytext:
-#     formats: py:percent
+#     formats: ipynb,py:percent
+#     notebook_metadata_filter: -jupytext.text_representation
 #   kernelspec:
 #     display_name: Python 3
 #     language: python
@@ -31,8 +32,6 @@
 
 # %%
 import json
-import shutil
-import tempfile
 from pathlib import Path
 
 import cv2
@@ -47,11 +46,11 @@ from nbcalib.io.image import read_image
 from nbcalib.matching.correspondences import lift_lidar_pixels
 from nbcalib.metrics import pose_errors
 from nbcalib.preprocess.lidar_image import visible_mask
-from nbcalib.teaching import is_quick, plotter, real_data_dir, show
+from nbcalib.teaching import is_quick, plotter, real_data_dir, show, work_folder
 from nbcalib.workdir import WorkDir, get_virtual_camera
 
 QUICK = is_quick()
-TMP = Path(tempfile.mkdtemp(prefix="nbcalib_10_"))  # everything this notebook writes
+TMP = work_folder("10_your_own_sensors")  # all it writes: notebooks/work/10_..., emptied first
 print("working in", TMP)
 
 # %% [markdown]
@@ -244,7 +243,7 @@ fig.tight_layout()
 
 # %%
 picker = ManualPicker(WORK)
-picker.show()
+figure = picker.show()  # the figure (with `%matplotlib widget`: clicks go to it)
 
 # %% [markdown]
 # ### Standing in for the clicks
@@ -488,10 +487,7 @@ if pl is not None:
     colored_view = show(pl, "the dense cloud, coloured from the camera image")
 
 # %%
-if QUICK:  # the test suite: clean up; a learner keeps the work directory and its report
-    shutil.rmtree(TMP, ignore_errors=True)
-else:
-    print(f"kept: {WORK} (open {WORK / 'report' / 'index.html'} in a browser)")
+print(f"kept until the next run: {WORK} (open {WORK / 'report' / 'index.html'} in a browser)")
 
 # %% [markdown]
 # Next: your own recording. In short:

@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 import subprocess
 import sys
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
@@ -33,10 +36,70 @@ def scene():
     return camera, image, points, intensities
 
 
+class _Handle:
+    """What IPython's ``display(..., display_id=True)`` returns: the texts it was updated to."""
+
+    def __init__(self, texts):
+        self.texts = texts
+
+    def update(self, bundle, raw=False):
+        self.texts.append(bundle["text/plain"])
+
+
 @pytest.fixture(scope="module")
-def result(scene):
+def in_a_notebook(scene):
+    """``calibrate`` as a learner calls it in a notebook, logging configured by nobody: what it
+    printed (stdout) and the progress bars it displayed (their texts, in order)."""
+    import logging
+
+    import IPython.display
+
+    import nbcalib.progress
+
     camera, image, points, intensities = scene
-    return nbcalib.calibrate(points, intensities, image, camera, T_init=T_START, max_outer=2)
+    printed, bars = io.StringIO(), []
+
+    def display(bundle, raw=False, display_id=False):
+        bars.append([bundle["text/plain"]])
+        return _Handle(bars[-1])
+
+    logger = logging.getLogger("nbcalib")
+    assert logger.level == logging.NOTSET and not logger.handlers  # nothing configured
+    with pytest.MonkeyPatch.context() as mp, contextlib.redirect_stdout(printed):
+        mp.setattr(logger, "propagate", False)  # pytest's own handlers (on the root) cut off
+        mp.setattr(nbcalib.progress, "in_jupyter", lambda: True)
+        mp.setattr(IPython.display, "display", display)
+        result = nbcalib.calibrate(points, intensities, image, camera, T_init=T_START, max_outer=2)
+    assert logger.level == logging.NOTSET and not logger.handlers  # left as found
+    return SimpleNamespace(result=result, printed=printed.getvalue(), bars=bars)
+
+
+@pytest.fixture(scope="module")
+def result(in_a_notebook):
+    return in_a_notebook.result
+
+
+def test_calibrate_shows_its_progress_in_a_notebook(in_a_notebook):
+    """Stage lines as the command line's, printed (no stderr block), and bars updated in place."""
+    lines = in_a_notebook.printed.splitlines()
+    assert lines[0].startswith("[1/") and "preprocess" in lines[0], lines[:3]
+    assert any(line.startswith("    calibrate done in") for line in lines), "\n".join(lines)
+    assert any(bar[0].startswith("quality") for bar in in_a_notebook.bars), in_a_notebook.bars
+
+
+def test_calibrate_progress_lines_to_a_callable(scene):
+    camera, image, points, intensities = scene
+    lines = []
+    nbcalib.calibrate(
+        points,
+        intensities,
+        image,
+        camera,
+        T_init=T_START,
+        max_outer=1,
+        log=lines.append,
+    )
+    assert lines[0].startswith("[1/") and any("done in" in line for line in lines), lines
 
 
 def test_calibrate_from_arrays_recovers_the_truth(result):

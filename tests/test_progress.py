@@ -210,3 +210,116 @@ def test_assess_and_refine_show_their_steps(caplog, every_step):
     lines = _lines(caplog)
     assert len(lines) == len(result.history) + 1
     assert lines[0].startswith("refine: 1 outer iterations (level 0, NID ")
+
+
+# ------------------------------------------------------------------ in a notebook, from the API
+
+
+@pytest.fixture
+def notebook(monkeypatch):
+    """A Jupyter kernel as the progress module sees it: the texts each display showed, in order."""
+    import IPython.display
+
+    shown = []
+
+    class Handle:
+        def __init__(self, texts):
+            self.texts = texts
+
+        def update(self, bundle, raw=False):
+            assert raw
+            self.texts.append(bundle["text/plain"])
+
+    def display(bundle, raw=False, display_id=False):
+        assert raw and display_id
+        shown.append([bundle["text/plain"]])
+        return Handle(shown[-1])
+
+    monkeypatch.setattr(progress_module, "in_jupyter", lambda: True)
+    monkeypatch.setattr(IPython.display, "display", display)
+    return shown
+
+
+def test_a_notebook_gets_a_bar_updated_in_place(caplog, clock, notebook):
+    caplog.set_level(logging.INFO, logger="nbcalib")
+    with Progress(10, "refine", stream=io.StringIO(), interval=5.0) as bar:
+        assert bar.mode == "notebook"
+        assert notebook == [["refine [....................] 0/10"]]  # at once
+        for k in range(10):
+            clock.now += 1.0
+            bar.update(what=f"step {k}")
+    (texts,) = notebook  # one display, updated in place
+    assert texts[1] == "refine [##..................] 1/10 step 0, 1.0 s, 9 s left"
+    assert len(texts) == 1 + 10 + 1  # at once, each update (1 s apart, >= 0.5 s), the end
+    assert texts[-1] == "refine [####################] 10/10 step 9, in 10.0 s"
+    assert _lines(caplog) == []  # no log lines beside it
+
+
+def test_a_quick_display_in_a_notebook_leaves_nothing(caplog, clock, notebook):
+    caplog.set_level(logging.INFO, logger="nbcalib")
+    with Progress(3, "quality", stream=io.StringIO()) as bar:
+        clock.now += 0.2
+        bar.update()
+    assert notebook == [["quality [....................] 0/3", ""]]
+
+
+def test_quiet_means_no_display_in_a_notebook_either(caplog, notebook):
+    caplog.set_level(logging.WARNING, logger="nbcalib")
+    assert Progress(3, "quality").mode == "off" and notebook == []
+
+
+@pytest.fixture
+def unconfigured(monkeypatch):
+    """Logging as a library user who configured nothing finds it: no level, no handler on the
+    way (pytest's own, on the root logger, cut off)."""
+    logger = logging.getLogger("nbcalib")
+    monkeypatch.setattr(logger, "level", logging.NOTSET)
+    monkeypatch.setattr(logger, "handlers", [])
+    monkeypatch.setattr(logger, "propagate", False)
+    return logger
+
+
+def _say(text):
+    logging.getLogger("nbcalib.pipeline").info(text)
+
+
+def test_the_api_prints_its_lines_in_a_notebook(unconfigured, notebook, capsys):
+    with progress_module.api_output():
+        assert unconfigured.level == logging.INFO
+        _say("[1/5] preprocess")
+    out, err = capsys.readouterr()
+    assert out == "[1/5] preprocess\n" and err == ""  # text, not a stderr block
+    assert unconfigured.level == logging.NOTSET and unconfigured.handlers == []
+
+
+def test_the_api_draws_on_a_terminal_and_says_nothing_into_a_pipe(
+    unconfigured, monkeypatch, capsys
+):
+    with progress_module.api_output():
+        _say("into a pipe")
+    assert capsys.readouterr() == ("", "")  # not a terminal: as Python's logging, nothing
+    with progress_module.api_output(progress=True):
+        _say("asked for")
+    assert capsys.readouterr() == ("", "asked for\n")
+    monkeypatch.setattr(progress_module, "_isatty", lambda stream: True)
+    with progress_module.api_output():
+        _say("on a terminal")
+    assert capsys.readouterr() == ("", "on a terminal\n")
+
+
+def test_the_api_leaves_a_configured_log_alone(unconfigured, notebook, capsys):
+    lines = []
+    handler = logging.Handler()
+    handler.emit = lambda record: lines.append(record.getMessage())
+    unconfigured.addHandler(handler)
+    unconfigured.setLevel(logging.INFO)
+    with progress_module.api_output():
+        _say("to the log")
+    assert lines == ["to the log"] and capsys.readouterr() == ("", "")
+    with progress_module.api_output(progress=False):
+        _say("quiet")
+        assert Progress(3, "x").mode == "off"
+    assert lines == ["to the log"] and unconfigured.level == logging.INFO
+    with progress_module.api_output(log=lines.append):
+        _say("forwarded")
+    assert lines[-2:] == ["forwarded", "forwarded"]  # to the callable, and to the log as before
