@@ -19,7 +19,7 @@ notebook as a notebook (not in the text editor).
     python benchmarks/bench_notebooks.py --out /tmp/nb                 # both phases, full mode
     python benchmarks/bench_notebooks.py --out /tmp/nb --phase run 06 07
     python benchmarks/bench_notebooks.py --out /tmp/nb --phase lab     # the saved copies again
-    python benchmarks/bench_notebooks.py --out /tmp/nb --quick --cold  # an empty numba cache
+    python benchmarks/bench_notebooks.py --out /tmp/nb --phase run --cold  # each: an empty cache
 
 Needs ``pip install -e ".[notebooks,dev]"``; the lab phase also ``pip install playwright`` and a
 Chromium (``apt install chromium``). One job at a time, on an idle machine. Prints Markdown
@@ -133,13 +133,13 @@ def phase_run(folder: Path, scripts: list[Path], quick: bool, cold: bool) -> dic
     os.environ.pop("MPLBACKEND", None)
     if quick:
         os.environ["NBCALIB_NOTEBOOK_QUICK"] = "1"
-    if cold:
-        os.environ["NUMBA_CACHE_DIR"] = tempfile.mkdtemp(prefix="nbcalib_numba_")
     results = {}
     print("| notebook | wall | longest silence (cell) | images | stderr, reprs |")
     print("|---|---|---|---|---|")
     for source in scripts:
         script = folder / source.name
+        if cold:  # each notebook as the first thing run on a fresh install
+            os.environ["NUMBA_CACHE_DIR"] = tempfile.mkdtemp(prefix="nbcalib_numba_")
         result = run_notebook(script, "nbcalib-bench")
         results[source.stem] = result
         worst = max(result["cells"], key=lambda c: c["silence"])
@@ -197,7 +197,8 @@ def start_lab(folder: Path, config: Path) -> tuple[subprocess.Popen, str]:
                 break
         except OSError:
             time.sleep(0.5)
-    return lab, f"{url}/lab/tree/{{path}}?token={token}"
+    # ?reset: a fresh workspace each time, not the tabs the last page left open
+    return lab, f"{url}/lab/tree/{{path}}?reset&token={token}"
 
 
 def _dismiss_kernel_dialog(page, wait: float = 10.0) -> None:
@@ -216,7 +217,7 @@ def _dismiss_kernel_dialog(page, wait: float = 10.0) -> None:
 
 def _open(page, url: str) -> None:
     page.goto(url)
-    page.wait_for_selector(".jp-NotebookPanel .jp-Notebook .jp-Cell", timeout=60000)
+    page.locator(".jp-NotebookPanel:visible .jp-Notebook .jp-Cell").first.wait_for(timeout=60000)
     _dismiss_kernel_dialog(page)
     page.wait_for_timeout(1500)
 
@@ -321,7 +322,7 @@ def main(argv=None) -> int:
     parser.add_argument("--out", type=Path, required=True, help="folder for everything written")
     parser.add_argument("--phase", choices=["run", "lab", "all"], default="all")
     parser.add_argument("--quick", action="store_true", help="the tests' quick mode")
-    parser.add_argument("--cold", action="store_true", help="an empty numba cache")
+    parser.add_argument("--cold", action="store_true", help="each notebook: an empty numba cache")
     parser.add_argument("--browser", help="Chromium's executable (default: chromium on PATH)")
     args = parser.parse_args(argv)
     scripts = NOTEBOOKS

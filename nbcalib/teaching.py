@@ -29,6 +29,7 @@ from nbcalib.progress import in_jupyter
 
 __all__ = [
     "egl_available",
+    "first_run_note",
     "has_display",
     "in_jupyter",
     "is_quick",
@@ -251,10 +252,32 @@ def show(pl, title: str | None = None) -> np.ndarray | None:
         display(fig, metadata={"nbcalib": {"view": "3-D", "title": title or ""}})
         plt.close(fig)
         if getattr(pl, "_nbcalib_live", False):
-            widget = pl.show(jupyter_backend="trame", return_viewer=True)
+            # rendered by the kernel (EGL) and streamed: no vtk.js or WebAssembly to fetch
+            widget = pl.show(jupyter_backend="server", return_viewer=True)
             bundle = widget._repr_mimebundle_()
             bundle = bundle[0] if isinstance(bundle, tuple) else bundle
             display({**bundle, "text/plain": LIVE_VIEW_TEXT}, raw=True)
             return image
     pl.close()
     return image
+
+
+def first_run_note() -> bool:
+    """Print that numba will compile the kernels, when its cache is cold (a first run here).
+
+    The notebooks import this module in their first code cell, which says it there once.
+    Returns whether it was said.
+    """
+    from nbcalib.warmup import cache_is_warm
+
+    if cache_is_warm():
+        return False
+    print(
+        "First run on this machine: numba compiles nbcalib's kernels as cells first use them "
+        "(then caches them), so some cells take seconds longer this time, up to about a minute "
+        "in all for a notebook."
+    )
+    return True
+
+
+first_run_note()

@@ -124,16 +124,16 @@ seq = generate_sequence(RigConfig(lidar="spinning64", scene="room", seed=2, dura
 room, room_intensity = seq.dense_cloud()
 room_camera = transform_points(seq.T_camera_lidar, room)
 scene_share = {}  # per model: the share of the room's points the camera sees
+grey_on_blue = plt.get_cmap("gray").with_extremes(bad="midnightblue")  # blue: no point
 fig, axes = plt.subplots(2, 4, figsize=(16, 7))
 for ax, model in zip(axes.ravel(), CAMERA_MODELS):
     cam = example_camera(model, 640, 480 if model != "equirectangular" else 320)
     uv, valid = cam.project(room_camera, in_image=True)
     scene_share[model] = valid.mean()
-    ax.scatter(uv[valid, 0], uv[valid, 1], s=0.1, c=room_intensity[valid], cmap="gray")
-    ax.set_xlim(0, cam.width)
-    ax.set_ylim(cam.height, 0)
-    ax.set_aspect("equal")
-    ax.set_facecolor("midnightblue")
+    canvas = np.full((cam.height, cam.width), np.nan)  # each point lights the pixel it lands in
+    u, v = np.floor(uv[valid]).astype(int).T
+    canvas[v, u] = room_intensity[valid]
+    ax.imshow(canvas, cmap=grey_on_blue)
     ax.set_title(f"{model}: {valid.mean():.0%} of the points")
 axes.ravel()[-1].axis("off")
 fig.tight_layout()

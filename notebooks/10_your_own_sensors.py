@@ -337,11 +337,12 @@ print(f"solvePnP and initial-guess --manual differ by {pnp_cm:.2f} cm and {pnp_d
 #
 # `nbcalib calibrate WORK` starts from the latest initial guess in `calib.json` (ours, the
 # manual one) and minimises the NID (notebook 7); `nbcalib report WORK` writes the quality
-# report. In quick mode at most two outer iterations per pyramid level (`--max-outer 2`).
+# report. In quick mode at most two outer iterations per pyramid level (`--max-outer 2`) and
+# one restart in the report (`--restarts 1`).
 
 # %%
 nbcalib_command("calibrate", WORK, *(["--max-outer", "2"] if QUICK else []))
-report_status, _ = nbcalib_command("report", WORK)
+report_status, _ = nbcalib_command("report", WORK, *(["--restarts", "1"] if QUICK else []))
 calib = read_calib_json(WORK / "calib.json")
 T_result = calib.get_T_camera_lidar("T_lidar_camera")
 quality = calib.nbcalib["quality"]

@@ -36,46 +36,67 @@ EXPECTED_WARNING = re.compile(r"no learned matcher exported in .*: using the SIF
 OBJECT_REPR = re.compile(r"<[\w.]+(?: object)? at 0x[0-9a-f]+>")
 
 
-def _kernel(tmp_path: Path, monkeypatch) -> str:
-    """A kernel spec of this Python (not whatever ``python3`` kernel the machine lists)."""
-    from ipykernel.kernelspec import write_kernel_spec
+@pytest.fixture(scope="module")
+def kernel(tmp_path_factory):
+    """One IPython kernel of this Python for all the notebooks, in quick mode, no learned matcher.
 
-    write_kernel_spec(tmp_path / "jupyter" / "kernels" / "nbcalib-test")
-    monkeypatch.setenv("JUPYTER_PATH", str(tmp_path / "jupyter"))
-    return "nbcalib-test"
-
-
-def run_notebook(notebook: Path, tmp_path: Path, monkeypatch):
-    """Run ``notebook`` in a kernel in ``tmp_path/work``, then its check; return the notebook.
-
-    Before the notebook, a cell outside it hides the learned matchers (the SIFT fallback: the
-    same path on every machine, and fast); after it, the check runs on the kernel's namespace.
+    As in a lab where one kernel ran the notebook before: its imports and the numba kernels
+    it loaded carry over (which saves most of a kernel's start per notebook), while each
+    notebook starts from an empty namespace (``%reset``), so a notebook that forgets an import
+    still fails. The learned matchers are hidden (the SIFT fallback: the same path on every
+    machine, and fast).
     """
-    jupytext = pytest.importorskip("jupytext")
-    nbclient = pytest.importorskip("nbclient")
-    from nbformat.v4 import new_code_cell
+    pytest.importorskip("nbclient")
+    from ipykernel.kernelspec import write_kernel_spec
+    from jupyter_client.manager import KernelManager
 
-    monkeypatch.setenv("NBCALIB_NOTEBOOK_QUICK", "1")
-    monkeypatch.delenv("MPLBACKEND", raising=False)  # the kernel's own (inline) backend
-    monkeypatch.delenv("NBCALIB_3D", raising=False)
-    empty = tmp_path / "no_models"
+    base = tmp_path_factory.mktemp("kernel")
+    write_kernel_spec(base / "jupyter" / "kernels" / "nbcalib-test")
+    empty = base / "no_models"
     empty.mkdir()
-    monkeypatch.setenv("NBCALIB_MODEL_DIR", str(empty))
-    work = tmp_path / "work"
-    work.mkdir()
-    nb = jupytext.read(notebook)
-    client = nbclient.NotebookClient(
-        nb,
-        timeout=900,
-        kernel_name=_kernel(tmp_path, monkeypatch),
-        resources={"metadata": {"path": str(work)}},
-    )
-    hide = new_code_cell(
+    env = {**os.environ, "NBCALIB_NOTEBOOK_QUICK": "1", "NBCALIB_MODEL_DIR": str(empty)}
+    env["JUPYTER_PATH"] = str(base / "jupyter")
+    for name in ("MPLBACKEND", "NBCALIB_3D"):  # the kernel's own (inline) backend; the default
+        env.pop(name, None)
+    os.environ["JUPYTER_PATH"] = env["JUPYTER_PATH"]  # where the manager finds the spec
+    try:
+        manager = KernelManager(kernel_name="nbcalib-test")
+        manager.start_kernel(env=env, cwd=str(base))
+    finally:
+        os.environ.pop("JUPYTER_PATH")
+    hide = (
         "from pathlib import Path\n"
         "from nbcalib.matching import onnx_matcher\n"
-        f"onnx_matcher.packaged_model_dir = lambda: Path({str(empty)!r})"
+        f"onnx_matcher.packaged_model_dir = lambda folder=Path({str(empty)!r}): folder\n"
     )
-    nb.cells.insert(0, hide)  # nbclient stores each cell's outputs at its index
+    yield manager, hide
+    manager.shutdown_kernel(now=True)
+
+
+def run_notebook(notebook: Path, work: Path, kernel):
+    """Run ``notebook`` in the kernel in ``work``, then its check; return the notebook.
+
+    Before the notebook, a cell outside it empties the namespace and moves to ``work``; after
+    it, the check runs on the namespace the notebook left.
+    """
+    jupytext = pytest.importorskip("jupytext")
+    from nbclient import NotebookClient
+    from nbformat.v4 import new_code_cell
+
+    manager, hide = kernel
+    if not manager.is_alive():  # an earlier notebook killed it
+        manager.restart_kernel(now=True)
+    work.mkdir()
+    nb = jupytext.read(notebook)
+    client = NotebookClient(nb, km=manager, timeout=900)
+    setup = new_code_cell(
+        "%reset -f\n"
+        "import os, matplotlib.pyplot\n"
+        f"os.chdir({str(work)!r})\n"
+        "matplotlib.pyplot.close('all')\n"
+        "matplotlib.rcParams['figure.dpi'] = 30\n" + hide + "del os, matplotlib, Path, onnx_matcher"
+    )
+    nb.cells.insert(0, setup)  # nbclient stores each cell's outputs at its index
     client.reset_execution_trackers()
     try:
         with client.setup_kernel():
@@ -173,8 +194,8 @@ def test_notebooks_found():
 
 @pytest.mark.slow
 @pytest.mark.parametrize("notebook", NOTEBOOKS, ids=lambda p: p.stem)
-def test_notebook_teaches(notebook, tmp_path, monkeypatch):
-    nb = run_notebook(notebook, tmp_path, monkeypatch)
+def test_notebook_teaches(notebook, tmp_path, kernel):
+    nb = run_notebook(notebook, tmp_path / "work", kernel)
     check_outputs(nb)
 
 
@@ -406,3 +427,13 @@ def test_teaching_finds_the_real_data(monkeypatch, tmp_path):
     beside = Path(teaching.__file__).resolve().parents[2] / "shared" / "data" / "real"
     monkeypatch.chdir(tmp_path)  # a working folder of no project: the one beside the package
     assert teaching.real_data_dir() == beside
+
+
+def test_teaching_says_when_kernels_will_compile(monkeypatch, capsys):
+    from nbcalib import teaching, warmup
+
+    monkeypatch.setattr(warmup, "cache_is_warm", lambda: False)
+    assert teaching.first_run_note()
+    assert "numba compiles nbcalib's kernels" in capsys.readouterr().out
+    monkeypatch.setattr(warmup, "cache_is_warm", lambda: True)
+    assert not teaching.first_run_note() and capsys.readouterr().out == ""

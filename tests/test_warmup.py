@@ -40,3 +40,14 @@ def test_a_cache_under_numba_cache_dir_counts(monkeypatch, tmp_path):
     marker.parent.mkdir(parents=True)
     marker.write_bytes(b"")
     assert warmup.cache_is_warm()
+
+
+def test_a_first_run_says_that_kernels_compile(monkeypatch, caplog):
+    import logging
+
+    caplog.set_level(logging.INFO, logger="nbcalib")
+    monkeypatch.setattr(warmup, "cache_is_warm", lambda: False)
+    assert warmup.compiling_note()
+    assert caplog.messages == [warmup.COMPILING_NOTE]
+    monkeypatch.setattr(warmup, "cache_is_warm", lambda: True)
+    assert not warmup.compiling_note() and caplog.messages == [warmup.COMPILING_NOTE]

@@ -160,6 +160,7 @@ def run(args: argparse.Namespace) -> int:
     if root.exists() and not root.is_dir():
         raise InputError("exists and is not a folder: give a folder for the demo", root)
     check_writable(root)
+    warmup.compiling_note()
     warmup.start()  # a first run: the later stages' kernels compile beside synth and matching
     data, work = root / "synth", root / "work"
     model_dir = getattr(args, "model_dir", None)

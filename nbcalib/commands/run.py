@@ -214,6 +214,7 @@ def run(args: argparse.Namespace) -> int:
     if "model_dir" in vars(args) or "model_dir" in file_other:
         check_model_dir(options.get("model_dir"))
     force = bool(options.get("force"))
+    warmup.compiling_note()
     warmup.start()  # a first run: the later stages' kernels compile beside the first ones
     calibrator = Calibrator(config, workdir=work, model_dir=options.get("model_dir"))
     calibrator.run_options = {k: options.get(k) for k in REMEMBERED}
