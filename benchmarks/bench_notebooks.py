@@ -87,7 +87,14 @@ def run_notebook(script: Path, kernel: str) -> dict:
             silence = max(b - a for a, b in itertools.pairwise(times))
             first = cell.source.strip().splitlines()[0] if cell.source.strip() else ""
             cells.append(
-                {"index": index, "seconds": end - start, "silence": silence, "first": first[:60]}
+                {
+                    "index": index,
+                    "seconds": end - start,
+                    "silence": silence,
+                    "to_first_output": times[1] - start,  # the cell's end when it shows nothing
+                    "calls_calibrate": "nbcalib.calibrate(" in cell.source,
+                    "first": first[:60],
+                }
             )
             if error:
                 break
@@ -144,6 +151,9 @@ def phase_run(folder: Path, scripts: list[Path], quick: bool, cold: bool) -> dic
         results[source.stem] = result
         worst = max(result["cells"], key=lambda c: c["silence"])
         flags = f"{len(result['stderr'])}, {len(result['reprs'])}"
+        api = [c["to_first_output"] for c in result["cells"] if c["calls_calibrate"]]
+        if api:
+            flags += f"; nbcalib.calibrate shows progress after {max(api):.2f} s"
         if result["error"]:
             flags += f"; FAILED {result['error']}"
         print(
@@ -264,9 +274,13 @@ def walk_links(page, template: str, stems: list[str]) -> list[dict]:
         # the next one as a notebook: a notebook panel whose tab is the next script
         tab = page.locator(f".lm-TabBar-tab.jp-mod-current:has-text('{following}.py')")
         tab.wait_for(timeout=30000)
-        page.wait_for_selector(
-            ".jp-NotebookPanel:not(.lm-mod-hidden) .jp-Notebook .jp-Cell", timeout=30000
-        )
+        notebook = page.locator(".jp-NotebookPanel:not(.lm-mod-hidden) .jp-Notebook .jp-Cell")
+        try:
+            notebook.first.wait_for(timeout=30000)
+        except Exception:  # opened, but not as a notebook (the text editor)
+            editor = page.locator(".jp-FileEditor:not(.lm-mod-hidden)").count()
+            steps.append({"from": current, "to": following, "title": None, "editor": editor})
+            break
         _dismiss_kernel_dialog(page)
         title = page.locator(".jp-NotebookPanel:not(.lm-mod-hidden) .jp-MarkdownOutput h1").first
         steps.append({"from": current, "to": following, "title": title.inner_text()[:60]})
@@ -302,7 +316,8 @@ def phase_lab(folder: Path, results: dict, out: Path, browser: str | None) -> di
                                template, stems)  # fmt: skip
             print("\n| link clicked | opened as a notebook, its title |\n|---|---|")
             for step in steps:
-                print(f"| {step['from']} -> {step['to']} | {step['title']} |")
+                opened = step["title"] or "NOT as a notebook" + (" (text editor)" * step["editor"])
+                print(f"| {step['from']} -> {step['to']} | {opened} |")
             chromium.close()
     finally:
         lab.terminate()
@@ -347,7 +362,8 @@ def main(argv=None) -> int:
             for stem, seen in figures["lab"]["saved"].items()
             if seen["drawn"] < figures["run"][stem]["images"] or seen["reprs"]
         ]
-        if len(figures["lab"]["links"]) < len(NOTEBOOKS) - 1:
+        links = figures["lab"]["links"]
+        if len(links) < len(NOTEBOOKS) - 1 or not all(step["title"] for step in links):
             failed.append("links")
     print(json.dumps(figures))
     return 1 if failed else 0

@@ -130,10 +130,11 @@ for ax, model in zip(axes.ravel(), CAMERA_MODELS):
     cam = example_camera(model, 640, 480 if model != "equirectangular" else 320)
     uv, valid = cam.project(room_camera, in_image=True)
     scene_share[model] = valid.mean()
-    canvas = np.full((cam.height, cam.width), np.nan)  # each point lights the pixel it lands in
-    u, v = np.floor(uv[valid]).astype(int).T
+    # each point lights the 2 x 2 pixel cell it lands in (blue: no point there)
+    canvas = np.full((cam.height // 2, cam.width // 2), np.nan)
+    u, v = (uv[valid] // 2).astype(int).T
     canvas[v, u] = room_intensity[valid]
-    ax.imshow(canvas, cmap=grey_on_blue)
+    ax.imshow(canvas, cmap=grey_on_blue, extent=(0, cam.width, cam.height, 0))
     ax.set_title(f"{model}: {valid.mean():.0%} of the points")
 axes.ravel()[-1].axis("off")
 fig.tight_layout()
