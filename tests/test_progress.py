@@ -268,10 +268,10 @@ def test_quiet_means_no_display_in_a_notebook_either(caplog, notebook):
     assert Progress(3, "quality").mode == "off" and notebook == []
 
 
-@pytest.fixture
-def unconfigured(monkeypatch):
+def unconfigured(monkeypatch) -> logging.Logger:
     """Logging as a library user who configured nothing finds it: no level, no handler on the
-    way (pytest's own, on the root logger, cut off)."""
+    way. Called in the test itself: pytest attaches its capture handlers to the root logger and
+    to loggers that do not propagate when the test starts (pytest >= 9.2), and they must go."""
     logger = logging.getLogger("nbcalib")
     monkeypatch.setattr(logger, "level", logging.NOTSET)
     monkeypatch.setattr(logger, "handlers", [])
@@ -283,18 +283,18 @@ def _say(text):
     logging.getLogger("nbcalib.pipeline").info(text)
 
 
-def test_the_api_prints_its_lines_in_a_notebook(unconfigured, notebook, capsys):
+def test_the_api_prints_its_lines_in_a_notebook(monkeypatch, notebook, capsys):
+    logger = unconfigured(monkeypatch)
     with progress_module.api_output():
-        assert unconfigured.level == logging.INFO
+        assert logger.level == logging.INFO
         _say("[1/5] preprocess")
     out, err = capsys.readouterr()
     assert out == "[1/5] preprocess\n" and err == ""  # text, not a stderr block
-    assert unconfigured.level == logging.NOTSET and unconfigured.handlers == []
+    assert logger.level == logging.NOTSET and logger.handlers == []
 
 
-def test_the_api_draws_on_a_terminal_and_says_nothing_into_a_pipe(
-    unconfigured, monkeypatch, capsys
-):
+def test_the_api_draws_on_a_terminal_and_is_silent_in_a_pipe(monkeypatch, capsys):
+    unconfigured(monkeypatch)
     with progress_module.api_output():
         _say("into a pipe")
     assert capsys.readouterr() == ("", "")  # not a terminal: as Python's logging, nothing
@@ -307,19 +307,20 @@ def test_the_api_draws_on_a_terminal_and_says_nothing_into_a_pipe(
     assert capsys.readouterr() == ("", "on a terminal\n")
 
 
-def test_the_api_leaves_a_configured_log_alone(unconfigured, notebook, capsys):
+def test_the_api_leaves_a_configured_log_alone(monkeypatch, notebook, capsys):
+    logger = unconfigured(monkeypatch)
     lines = []
     handler = logging.Handler()
     handler.emit = lambda record: lines.append(record.getMessage())
-    unconfigured.addHandler(handler)
-    unconfigured.setLevel(logging.INFO)
+    logger.addHandler(handler)
+    logger.setLevel(logging.INFO)
     with progress_module.api_output():
         _say("to the log")
     assert lines == ["to the log"] and capsys.readouterr() == ("", "")
     with progress_module.api_output(progress=False):
         _say("quiet")
         assert Progress(3, "x").mode == "off"
-    assert lines == ["to the log"] and unconfigured.level == logging.INFO
+    assert lines == ["to the log"] and logger.level == logging.INFO
     with progress_module.api_output(log=lines.append):
         _say("forwarded")
     assert lines[-2:] == ["forwarded", "forwarded"]  # to the callable, and to the log as before

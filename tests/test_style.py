@@ -100,7 +100,8 @@ def test_notebooks_are_jupytext_percent_scripts():
     for path in notebooks:
         text = path.read_text()
         header = _JUPYTEXT_HEADER.match(text)
-        assert header and "#     formats: py:percent\n" in header.group(0), path.name
+        # paired with the .ipynb JupyterLab writes beside it (tests/test_notebooks.py)
+        assert header and "#     formats: ipynb,py:percent\n" in header.group(0), path.name
         compile(text, str(path), "exec")
         nb = jupytext.reads(text, fmt="py:percent")
         markers = re.findall(r"^# %%.*$", text, flags=re.MULTILINE)
