@@ -45,10 +45,11 @@ def cache_is_warm() -> bool:
     return any((Path(__file__).parent / "kernels" / "__pycache__").glob(pattern))
 
 
-#: What a first run says before its kernels compile (measured: BENCHMARKS.md, "Cold start").
+#: What a first run says before its kernels compile. Measured on two cores (BENCHMARKS.md 7
+#: and 9): the demo about 20 s more than warm (with the background warm-up), a notebook 12-53 s.
 COMPILING_NOTE = (
     "first run on this machine: numba compiles nbcalib's kernels as they are first used, "
-    "about 40 s in all on two cores, once (later runs load them from the cache)"
+    "up to about a minute on two cores, once (later runs load them from the cache)"
 )
 
 
