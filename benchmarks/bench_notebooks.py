@@ -16,10 +16,10 @@ view goes to ``OUT/screens``. Then, from ``00_frames_and_transforms.py`` opened 
 click's default viewer, the "Next" link of each notebook is clicked: each must open the next
 notebook as a notebook (not in the text editor).
 
-    python benchmarks/bench_notebooks.py --out /tmp/nb                 # both phases, full mode
-    python benchmarks/bench_notebooks.py --out /tmp/nb --phase run 06 07
-    python benchmarks/bench_notebooks.py --out /tmp/nb --phase lab     # the saved copies again
-    python benchmarks/bench_notebooks.py --out /tmp/nb --phase run --cold  # each: an empty cache
+    python benchmarks/bench_notebooks.py --out nb_run                 # both phases, full mode
+    python benchmarks/bench_notebooks.py --out nb_run --phase run 06 07
+    python benchmarks/bench_notebooks.py --out nb_run --phase lab     # the saved copies again
+    python benchmarks/bench_notebooks.py --out nb_run --phase run --cold  # each: an empty cache
 
 Needs ``pip install -e ".[notebooks,dev]"``; the lab phase also ``pip install playwright`` and a
 Chromium (``apt install chromium``). One job at a time, on an idle machine. Prints Markdown

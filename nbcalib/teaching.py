@@ -268,15 +268,11 @@ def first_run_note() -> bool:
     The notebooks import this module in their first code cell, which says it there once.
     Returns whether it was said.
     """
-    from nbcalib.warmup import cache_is_warm
+    from nbcalib.warmup import COMPILING_NOTE, cache_is_warm
 
     if cache_is_warm():
         return False
-    print(
-        "First run on this machine: numba compiles nbcalib's kernels as cells first use them "
-        "(then caches them), so some cells take seconds longer this time, up to about a minute "
-        "in all for a notebook."
-    )
+    print(COMPILING_NOTE[0].upper() + COMPILING_NOTE[1:] + ".")  # the one text the CLI logs too
     return True
 
 
