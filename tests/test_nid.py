@@ -335,3 +335,37 @@ def test_visible_indices_are_the_visible_points_in_pixel_order(rng):
         a = NIDCost(cam, image, pts[keep], inten[keep], form=form)
         b = NIDCost(cam, image, pts[idx], inten[idx], form=form)
         assert_allclose(b.value(T), a.value(T), rtol=1e-12)
+
+
+def test_a_pair_computes_its_visible_set_once_per_pose(rng, monkeypatch):
+    """RegistrationPair.visibility keeps the last two poses' z-buffers; the subsets it gives are
+    visible_indices' to the index, with or without a selection."""
+    import nbcalib.preprocess.lidar_image as li
+    from nbcalib.registration.config import RefineConfig
+    from nbcalib.registration.refine import RegistrationPair, visible_subset
+
+    cam = example_camera("plumb_bob", 320, 240)
+    image, pts, inten = textured_scene(cam, rng, n=3000)
+    pair = RegistrationPair(cam, image, pts, inten)
+    config = RefineConfig(window=1)
+    poses = [
+        se3_exp(np.array([0.002 * k, -0.003, 0.001, 0.001 * k, -0.0015, 0.0005])) for k in range(3)
+    ]
+    calls = []
+    real = li.visibility
+    monkeypatch.setattr(li, "visibility", lambda *a, **k: calls.append(1) or real(*a, **k))
+    half = lambda keep: keep[::2]  # noqa: E731
+    for T in (poses[0], poses[1], poses[0], poses[1]):  # two poses: one z-buffer each
+        want = li.visible_indices(cam, T, pts, margin=config.depth_margin, window=1)
+        assert np.array_equal(visible_subset(pair, T, config), want)
+        want_half = li.visible_indices(
+            cam, T, pts, margin=config.depth_margin, window=1, select=half
+        )
+        assert np.array_equal(visible_subset(pair, T, config, select=half), want_half)
+    assert len(calls) == 2 + 8  # 2 by the pair; 8 by visible_indices, the reference here
+    visible_subset(pair, poses[2], config)  # a third pose pushes out the oldest
+    visible_subset(pair, poses[0], config)
+    assert len(calls) == 10 + 2
+    pair.camera = example_camera("plumb_bob", 320, 240)  # another camera: computed again
+    visible_subset(pair, poses[0], config)
+    assert len(calls) == 13

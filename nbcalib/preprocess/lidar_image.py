@@ -42,6 +42,7 @@ __all__ = [
     "intensity_to_uint8",
     "make_virtual_camera",
     "render_lidar_image",
+    "visibility",
     "visible_indices",
     "visible_mask",
 ]
@@ -439,9 +440,26 @@ def visible_indices(
     ndarray of shape (M,), int64
         Indices into ``points_lidar``.
     """
+    keep, pixel = visibility(camera, T_camera_lidar, points_lidar, margin=margin, window=window)
+    return sorted_by_pixel(keep, pixel, select)
+
+
+def visibility(
+    camera: CameraModel, T_camera_lidar, points_lidar, *, margin: float = 0.1, window: int = 0
+) -> tuple[np.ndarray, np.ndarray]:
+    """The visible points in cloud order and the flat pixel of every point.
+
+    What :func:`visible_indices` orders: ``(keep (M,) int64, pixel (N,) int64)``, ``pixel``
+    row-major, -1 off the image. Callers that need the visible set several times at one pose
+    keep this and order it with :func:`sorted_by_pixel` (the z-buffer is the expensive part).
+    """
     T, points = _check_inputs(camera, T_camera_lidar, points_lidar, "T_camera_lidar")
     mask, pixel = _visibility(camera, T, points, margin, window)
-    keep = np.flatnonzero(mask)
+    return np.flatnonzero(mask), pixel
+
+
+def sorted_by_pixel(keep: np.ndarray, pixel: np.ndarray, select=None) -> np.ndarray:
+    """``keep`` (after ``select``, as :func:`visible_indices`) ordered by pixel, ties in order."""
     if select is not None:
         keep = select(keep)
     return keep[np.argsort(pixel[keep], kind="stable")]

@@ -236,10 +236,12 @@ def _write_figures(folder: Path, quality, loaded, pairs, config, T, T_init, step
     for k, (work_pair, pair) in enumerate(zip(loaded, pairs)):
         if k >= MAX_PAIRS_DRAWN:
             break
+        # the result's visible set first: the report's cost has it already
+        result = visible_subset(pair, T, config)
         poses = []
         if T_init is not None:
             poses.append(("initial guess", T_init, visible_subset(pair, T_init, config)))
-        poses.append(("result", T, visible_subset(pair, T, config)))
+        poses.append(("result", T, result))
         stem = _safe(pair.name or str(k))
         save(
             f"overlay_{stem}.png",
