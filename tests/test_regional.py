@@ -164,6 +164,30 @@ def test_median_cut_regions(rng):
         median_cut_regions(uv, 0)
 
 
+@pytest.mark.parametrize("region_points", [1, 3, 40, 600])
+def test_median_cut_kernel_equals_its_reference(rng, region_points):
+    """The same regions to the point, ties included: whole pixels repeat, and a row of equal
+    u, a block of equal (u, v) and spans of equal length test the tie-breaking."""
+    from nbcalib.kernels.regions import median_cut_regions as kernel
+    from nbcalib.reference.regions import median_cut_regions as reference
+
+    cases = [
+        np.column_stack([rng.uniform(0, 1280, 5000), rng.uniform(0, 960, 5000)]),
+        np.floor(np.column_stack([rng.uniform(0, 40, 4000), rng.uniform(0, 30, 4000)])),
+        np.column_stack([np.full(300, 7.0), rng.uniform(0, 5, 300)]),
+        np.zeros((500, 2)),
+        np.array([[0.0, 0.0], [2.0, 2.0], [0.0, 2.0], [2.0, 0.0]] * 60),
+    ]
+    for uv in cases:
+        assert np.array_equal(kernel(uv, region_points), reference(uv, region_points))
+        assert np.array_equal(median_cut_regions(uv, region_points), reference(uv, region_points))
+
+
+def test_median_cut_regions_refuses_non_finite_pixels():
+    with pytest.raises(ValueError, match="finite"):
+        median_cut_regions(np.array([[0.0, np.nan], [1.0, 2.0]]), 1)
+
+
 def test_the_cost_setting_chooses_the_term(rng):
     cam = example_camera("plumb_bob", 320, 240)
     image, pts, inten = textured_scene(cam, rng, n=9000)

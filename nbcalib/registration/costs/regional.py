@@ -63,26 +63,17 @@ def median_cut_regions(pixels, region_points: int) -> np.ndarray:
     -------
     ndarray of shape (N,), int64
         Region ids ``0 .. R - 1``; a region is a box of the image, cut along its longer side at
-        the median (ties broken by the points' order, so the result is deterministic).
+        the median (ties broken by the points' order, so the result is deterministic). The
+        numba kernel :mod:`nbcalib.kernels.regions`; its reference
+        :func:`nbcalib.reference.regions.median_cut_regions`.
     """
+    from nbcalib.kernels import regions as kernel
+
     uv = np.asarray(pixels, dtype=np.float64)
     if uv.ndim != 2 or uv.shape[1] != 2:
         raise ValueError(f"pixels must have shape (N, 2), got {uv.shape}")
     if region_points < 1:
         raise ValueError(f"region_points must be >= 1, got {region_points}")
-    regions = np.zeros(len(uv), dtype=np.int64)
-    stack = [np.arange(len(uv))]
-    leaves = []
-    while stack:
-        idx = stack.pop()
-        if idx.size < 2 * region_points:
-            leaves.append(idx)
-            continue
-        span = uv[idx].max(axis=0) - uv[idx].min(axis=0)
-        axis = int(np.argmax(span))
-        order = idx[np.argsort(uv[idx, axis], kind="stable")]
-        half = order.size // 2
-        stack += [order[half:], order[:half]]
-    for region, idx in enumerate(leaves):
-        regions[idx] = region
-    return regions
+    if not np.all(np.isfinite(uv)):
+        raise ValueError("pixels must be finite")
+    return kernel.median_cut_regions(uv, int(region_points))
