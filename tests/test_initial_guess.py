@@ -90,6 +90,37 @@ def test_same_seed_same_answer_and_reference_procedure():
     _assert_success(ref, truth)
 
 
+def test_the_same_inputs_asked_again_give_the_kept_estimate(monkeypatch):
+    """Matching's test and the initial-guess stage estimate from the same correspondences:
+    the second is the first's result; any other input (a value, the weights, a setting, the
+    seed) is estimated anew."""
+    import nbcalib.initial_guess.estimate as estimate
+
+    camera = example_camera("plumb_bob", 640, 480)
+    truth = default_T_camera_lidar("spinning", 2)
+    c = synthetic_correspondences(camera, truth, 1, n_inliers=60, outlier_fraction=0.5)
+    runs = []
+    real = estimate._estimate
+    monkeypatch.setattr(estimate, "_estimate", lambda *a: runs.append(1) or real(*a))
+    monkeypatch.setattr(estimate, "_MEMO", {})
+    uv = c.uv_camera.copy()
+    first = estimate_initial_guess(camera, uv, c.points_lidar, seed=1)
+    assert estimate_initial_guess(camera, uv.copy(), c.points_lidar, seed=1) is first
+    assert len(runs) == 1
+    weights = np.ones(len(uv))
+    others = [
+        dict(seed=2),
+        dict(seed=1, weights=weights),
+        dict(seed=1, ransac_iterations=1000),
+    ]
+    for kwargs in others:
+        assert estimate_initial_guess(camera, uv, c.points_lidar, **kwargs) is not first
+    uv[0, 0] += 1.0  # an array changed in place is another input
+    estimate_initial_guess(camera, uv, c.points_lidar, seed=1)
+    assert len(runs) == 1 + len(others) + 1
+    assert len(estimate._MEMO) == estimate._MEMO_SIZE  # the oldest went
+
+
 def test_confidence_weights_favour_confident_matches():
     camera = example_camera("pinhole", 640, 480)
     truth = _camera_looking(-40.0)
