@@ -157,6 +157,13 @@ def main(argv=None) -> int:
         help="comma-separated RefineConfig.cost values (nbcalib calibrate --cost) run side by "
         "side on the same pairs and starts (default: RefineConfig's)",
     )
+    parser.add_argument(
+        "--nm-tolerances",
+        default=None,
+        help="comma-separated XATOL:FATOL of Nelder-Mead (RefineConfig.nelder_mead_xatol, "
+        "nelder_mead_fatol) run side by side on the same pairs and starts, e.g. "
+        "'1e-6:1e-8,1e-4:1e-5' (SciPy's own, then the default)",
+    )
     args = parser.parse_args(argv)
     if args.points_per_pixel is None:
         ppps = [RefineConfig().points_per_pixel]
@@ -166,14 +173,21 @@ def main(argv=None) -> int:
             for v in args.points_per_pixel.split(",")
         ]
     costs = args.cost.split(",") if args.cost else [RefineConfig().cost]
+    default_tol = (RefineConfig().nelder_mead_xatol, RefineConfig().nelder_mead_fatol)
+    tolerances = [
+        tuple(float(x) for x in v.split(":")) for v in (args.nm_tolerances or "").split(",") if v
+    ] or [default_tol]
     # (label, RefineConfig overrides) of every variant run side by side
     variants = [
         (
-            (f"-ppp{v}" if len(ppps) > 1 else "") + (f"-cost{c}" if len(costs) > 1 else ""),
-            {"points_per_pixel": v, "cost": c},
+            (f"-ppp{v}" if len(ppps) > 1 else "")
+            + (f"-cost{c}" if len(costs) > 1 else "")
+            + (f"-nm{xa:g}:{fa:g}" if len(tolerances) > 1 else ""),
+            {"points_per_pixel": v, "cost": c, "nelder_mead_xatol": xa, "nelder_mead_fatol": fa},
         )
         for v in ppps
         for c in costs
+        for xa, fa in tolerances
     ]
     combos, seeds, trials, max_points = COMBOS, range(args.seeds), args.trials, args.max_points
     if args.combos:

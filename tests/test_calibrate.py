@@ -203,6 +203,30 @@ def test_lbfgs_ftol_reaches_the_optimiser(rng):
         RefineConfig(lbfgs_ftol=0.0)
 
 
+def test_nelder_mead_tolerances_reach_the_optimiser(rng):
+    """SciPy's own stops (1e-6, 1e-8) make Nelder-Mead shrink its simplex far longer than the
+    default's; a bad one is refused."""
+    cam = example_camera("plumb_bob", 160, 120)
+    image, points, intensities = textured_scene(cam, rng, n=4000, blur=1.5)
+    pair = RegistrationPair(cam, image, points, intensities)
+    T_start = se3_exp(np.array([0.01, -0.01, 0.0, 0.004, 0.0, -0.003]))
+    evaluations = {}
+    for xatol, fatol in ((1e-6, 1e-8), (1e-4, 1e-5)):
+        config = RefineConfig(
+            optimizer="nelder_mead",
+            pyramid_levels=0,
+            hidden_point_removal=False,
+            parallel=False,
+            nelder_mead_xatol=xatol,
+            nelder_mead_fatol=fatol,
+            max_outer=1,
+        )
+        evaluations[fatol] = refine([pair], T_start, config).history[0].evaluations
+    assert evaluations[1e-8] > evaluations[1e-5], evaluations
+    with pytest.raises(ValueError, match="nelder_mead_xatol"):
+        RefineConfig(nelder_mead_fatol=0.0)
+
+
 def test_pyramid_widens_the_basin(rng):
     """From 3 degrees / 10 cm off, the coarse-to-fine run gets back to the truth; the single
     full-resolution level (the reference's procedure) does not move on this finely textured scene

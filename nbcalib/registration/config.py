@@ -70,6 +70,12 @@ class RefineConfig:
         Initial simplex size in the tangent space, metres and radians, doubled per pyramid level
         (1e-2; reference: 1e-3, whose simplex converged in 3 / 2 / 0 / 0 of 5 starts 1 / 2 / 3 /
         5 degrees off, against 5 / 5 / 5 / 5 with 1e-2: docs/BENCHMARKS.md).
+    nelder_mead_xatol, nelder_mead_fatol : float
+        Nelder-Mead stops when its simplex is this small (metres and radians, doubled per
+        pyramid level: 1e-4, a tenth of a millimetre) and its values this close (NID units:
+        1e-5). The hard NID is a step function of the pose; with SciPy's 1e-8 the simplex
+        went on shrinking far below the precision an outer iteration's stop asks for (1 mm,
+        0.01 degree): a third of the evaluations for the same result (docs/BENCHMARKS.md 10).
     pyramid_levels : int
         Coarse levels above the full-resolution image (0: full resolution only, as the
         reference). Level ``k`` halves the image ``k`` times; see the module docstring. Levels
@@ -135,6 +141,8 @@ class RefineConfig:
     max_inner: int = 50
     lbfgs_ftol: float = 1e-7
     nelder_mead_init_step: float = 1e-2
+    nelder_mead_xatol: float = 1e-4
+    nelder_mead_fatol: float = 1e-5
     pyramid_levels: int = 2
     min_pyramid_size: int = 240
     trust_translation: float = 0.5
@@ -165,6 +173,8 @@ class RefineConfig:
                 raise ValueError(f"{name} must be >= 0")
         if not self.trust_rotation_deg < 180:
             raise ValueError(f"trust_rotation_deg must be < 180, got {self.trust_rotation_deg}")
+        if not (self.nelder_mead_xatol > 0 and self.nelder_mead_fatol > 0):
+            raise ValueError("nelder_mead_xatol and nelder_mead_fatol must be > 0")
         if not self.lbfgs_ftol > 0:
             raise ValueError(f"lbfgs_ftol must be > 0, got {self.lbfgs_ftol}")
         if self.max_outer < 1 or self.max_inner < 1:

@@ -476,6 +476,8 @@ def _outer_iteration(
             max_translation=config.max_translation,
             max_rotation=max_rot,
             max_evaluations=40 * config.max_inner,
+            xatol=config.nelder_mead_xatol * 2**level,
+            fatol=config.nelder_mead_fatol,
             trust_region=region,
         )
     T_new = inner.T_camera_lidar
