@@ -19,7 +19,7 @@ from nbcalib.preprocess.lidar_image import (
     render_lidar_image,
 )
 from nbcalib.products import PairData
-from nbcalib.registration.refine import RegistrationPair
+from nbcalib.registration.refine import RefineConfig, RegistrationPair
 from nbcalib.report import AssessConfig, assess, rejudge
 from nbcalib.transforms import se3_exp, se3_log
 from nbcalib.workdir import WorkDir, make_calib
@@ -770,6 +770,31 @@ def test_restarts_that_end_elsewhere_widen_the_interval_and_make_it_suspect(qual
     near = replace(quality_at_truth, restart_offsets=ends * 0.1)
     assert not any("registration starts" in r for r in rejudge(near, c).reasons)
     assert rejudge(moved, replace(c, restarts=0)).verdict == "ok"
+
+
+def test_restarts_score_restart_points_of_the_pair(pair, monkeypatch):
+    """Each restart scores AssessConfig.restart_points points (never more than fine
+    registration's own budget); None: fine registration's budget as it is."""
+    import nbcalib.report.quality as quality_module
+
+    budgets = []
+    real = quality_module.refine
+
+    def spy(pairs, T0, config, **kwargs):
+        pixels = pairs[0].camera.width * pairs[0].camera.height
+        budgets.append(max(config.points_per_pixel * pixels, config.min_sampled_points))
+        return real(pairs, T0, config, **kwargs)
+
+    monkeypatch.setattr(quality_module, "refine", spy)
+    refine_config = RefineConfig(points_per_pixel=0.25, min_sampled_points=50_000)
+    own = max(0.25 * pair.camera.width * pair.camera.height, 50_000)
+    for points, want in ((1000, 1000), (10**9, own), (None, own)):
+        budgets.clear()
+        assess([pair], np.eye(4), config=refine_config, assess_config=AssessConfig(
+            restarts=2, restart_points=points))  # fmt: skip
+        assert budgets == pytest.approx([want, want])
+    with pytest.raises(ValueError, match="restart_points"):
+        AssessConfig(restart_points=0)
 
 
 def test_several_pairs_are_not_restarted():

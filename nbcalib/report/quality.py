@@ -48,7 +48,8 @@ minima within a degree of each other; which one fine registration finds depends 
 and neither the curvature nor the jackknife at the result sees the others. Fine registration is
 run again, for a single pair, from :attr:`AssessConfig.restarts` starts around the result
 (:func:`restart_starts`: turned by exactly ``restart_rotation_deg``, moved by exactly
-``restart_translation``, seeded directions); ``restart_scale`` times the mean outer product of
+``restart_translation``, seeded directions; each scores ``restart_points`` of the pair's
+points); ``restart_scale`` times the mean outer product of
 where they end (:attr:`Quality.restart_offsets`) joins the covariance, and a median end farther
 than ``max_restart_rotation_deg`` in rotation makes the result suspect. Synthetic pairs'
 restarts come back to within 0.3 cm / 0.01 deg; real ones end centimetres and tenths of a degree
@@ -671,6 +672,12 @@ def _restart_offsets(pairs, T: np.ndarray, config: RefineConfig, acfg: AssessCon
     curvature nor the image regions' jackknife sees.
     """
     starts = restart_starts(T, acfg.restarts, acfg.restart_translation, acfg.restart_rotation_deg)
+    if acfg.restart_points is not None:  # at most restart_points per pair
+        pixels = max(p.camera.width * p.camera.height for p in pairs)
+        budget = acfg.restart_points
+        if config.points_per_pixel is not None:
+            budget = min(budget, max(config.points_per_pixel * pixels, config.min_sampled_points))
+        config = replace(config, points_per_pixel=budget / pixels, min_sampled_points=budget)
     out = np.empty((len(starts), 6))
     for k, T0 in enumerate(starts):
         out[k] = se3_log(refine(pairs, T0, config).T_camera_lidar @ invert_T(T))
