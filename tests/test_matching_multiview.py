@@ -387,3 +387,89 @@ def test_find_correspondences_retries_finer_inpainted_views_until_a_guess_passes
     assert seen == [(None, 0.0, 1024)] and found.kept_attempt == 0
     with pytest.raises(ValueError, match="fine_max_keypoints"):
         MatchConfig(fine_max_keypoints=0)
+
+
+def test_mutual_nearest_equals_a_loop_over_keypoints(rng):
+    from nbcalib.matching.match import mutual_nearest
+
+    d0 = rng.standard_normal((40, 8)).astype(np.float32)
+    d1 = np.concatenate(
+        [d0[:25] + 0.05 * rng.standard_normal((25, 8)), rng.standard_normal((30, 8))]
+    )
+    d0 /= np.linalg.norm(d0, axis=1, keepdims=True)
+    d1 = (d1 / np.linalg.norm(d1, axis=1, keepdims=True)).astype(np.float32)
+    matches, scores = mutual_nearest(d0, d1)
+    for i in range(len(d0)):  # the slow definition
+        j = int(np.argmax([float(d0[i] @ d1[k]) for k in range(len(d1))]))
+        back = int(np.argmax([float(d0[k] @ d1[j]) for k in range(len(d0))]))
+        assert matches[i] == (j if back == i else -1)
+        assert scores[i] == pytest.approx(float(d0[i] @ d1[j]) if back == i else 0.0, abs=1e-6)
+    assert np.all(matches[:25] == np.arange(25))  # the perturbed copies find their originals
+    empty, none = mutual_nearest(d0[:0], d1)
+    assert empty.shape == (0,) and none.shape == (0,)
+
+
+def test_match_images_reuses_the_camera_features_it_caches(rng):
+    from nbcalib.matching import match_images
+
+    camera, image, points, intensities, truth = _self_consistent_pair(rng, 30.0)
+    view = render_view(camera, truth[:3, :3], points, intensities, scale=1.0, fill_radius=2)
+    cache: dict = {}
+    plain = match_images(image, view.intensity, matcher="xfeat-lighterglue", max_keypoints=512)
+    first = match_images(
+        image, view.intensity, matcher="xfeat-lighterglue", max_keypoints=512, cache=cache
+    )
+    again = match_images(
+        image, view.intensity, matcher="xfeat-lighterglue", max_keypoints=512, cache=cache
+    )
+    assert len(cache) == 1
+    for m in (first, again):
+        assert np.array_equal(m.kpts_camera, plain.kpts_camera)
+        assert np.array_equal(m.matches, plain.matches)
+    screened = match_images(
+        image, view.intensity, matcher="xfeat-lighterglue", max_keypoints=512, screen=True
+    )
+    assert screened.info["screen"] and not plain.info["screen"]
+    assert screened.num_matches > 0 and np.all(screened.confidence <= 1.0 + 1e-6)
+
+
+def test_the_screen_runs_the_matcher_on_the_views_it_ranks_first(rng):
+    """12 headings screened, the learned matcher on 3: the best and pooled views are among
+    them, the same best as the matcher on every view, every view drawn once."""
+    camera, image, points, intensities, _ = _self_consistent_pair(rng, 60.0)
+    kwargs = dict(matcher="xfeat-lighterglue", views=12, max_keypoints=512, refine_view=False)
+    done = []
+    mv = match_views(
+        camera, image, points, intensities, screen_views=3, progress=lambda k, n: done.append(n),
+        **kwargs,
+    )  # fmt: skip
+    every = match_views(camera, image, points, intensities, screen_views=0, **kwargs)
+    screened = [v.screened for v in mv.views]
+    assert sum(not s for s in screened) == 3 and not any(v.screened for v in every.views)
+    assert not screened[mv.best] and all(not screened[k] for k in mv.pooled)
+    assert mv.views[mv.best].view.heading_deg == every.views[every.best].view.heading_deg
+    assert mv.views[mv.best].ransac_inliers == every.views[every.best].ransac_inliers
+    assert len(done) == 12 + 3 and set(done) == {15}
+    assert "(screened out)" in mv.summary()
+
+
+def test_the_screen_also_sends_the_views_that_agree_to_the_matcher():
+    """Views whose screened rotation agrees with the first's (the pool's rule) are matched in
+    full beyond screen_views; disagreeing or weak ones are not."""
+    from types import SimpleNamespace
+
+    from nbcalib.matching.config import MatchConfig
+    from nbcalib.matching.multiview import _screened_choice
+    from nbcalib.transforms import so3_exp
+
+    def view(support, angle_deg):
+        R = None if angle_deg is None else so3_exp([0.0, 0.0, math.radians(angle_deg)])
+        return SimpleNamespace(ransac_inliers=support, R_camera_lidar=R)
+
+    results = [view(50, 0.0), view(40, 30.0), view(30, 1.0), view(20, 0.5), view(5, 0.2)]
+    results += [view(12, None), view(25, 60.0)]
+    cfg = MatchConfig(screen_views=2)
+    # the two best, then 2 and 3 (agree, >= min_pool_support); 4 too weak, 5 no rotation
+    assert _screened_choice(results, cfg) == {0, 1, 2, 3}
+    assert _screened_choice(results, MatchConfig(screen_views=2, pool=False)) == {0, 1}
+    assert _screened_choice([], cfg) == set()

@@ -182,6 +182,10 @@ MATCHING = (
     Option("--views", "matching.views",
            "camera-shaped LiDAR views at N headings around the LiDAR (0: match the stored "
            "LiDAR image instead, as the reference)", "N"),
+    Option("--screen-views", "matching.screen_views",
+           "run the learned matcher on the N views a cheap screen (descriptors' mutual nearest "
+           "neighbours) ranks first, and on the views agreeing with the first (0: on every "
+           "view)", "N"),
     Option("--search-radius", "matching.search_radius",
            "LiDAR keypoints on empty pixels take the nearest LiDAR point within this radius, "
            "pixels", "PX"),

@@ -68,6 +68,13 @@ class MatchConfig:
         few orientations around a prior), and the view with the most rotation-only RANSAC
         inliers is kept (:mod:`nbcalib.matching.multiview`). 0: match the stored LiDAR image of
         preprocessing instead, as the reference toolbox does.
+    screen_views : int
+        When there are more views than this, every view is first matched by its descriptors'
+        mutual nearest neighbours (a tenth of LighterGlue's second a view) and the learned
+        matcher runs on this many, those with the most RANSAC support of the screen, and on
+        every view whose screened rotation agrees with the first's as the pool asks (0: the
+        matcher on every view; SIFT always matches every view). The best and pooled views
+        are chosen among these (docs/BENCHMARKS.md, section 10).
     prior_yaw_offsets_deg : tuple of float
         Yaw offsets of the views around a prior, degrees.
     pixels_per_degree : float or None
@@ -131,6 +138,7 @@ class MatchConfig:
     sift_ratio: float = 0.8
     threads: int | None = None
     views: int = 12
+    screen_views: int = 4
     prior_yaw_offsets_deg: tuple[float, ...] = (-20.0, 0.0, 20.0)
     pixels_per_degree: float | None = None
     min_fill: float = 0.05
@@ -183,7 +191,7 @@ class MatchConfig:
             value = getattr(self, name)
             if value is not None and value < 1:
                 raise ValueError(f"{name} must be >= 1, got {value}")
-        for name in ("fill_radius", "median", "views"):
+        for name in ("fill_radius", "median", "views", "screen_views"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
         for name in ("search_radius", "splat_pixels_at_1m", "pool_angle_deg"):

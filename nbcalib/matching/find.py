@@ -261,6 +261,7 @@ def find_correspondences(
                     "matches": v.matches.num_matches,
                     "lifted": len(v.correspondences),
                     "ransac_inliers": v.ransac_inliers,
+                    "screened": v.screened,
                 }
                 for v in views.views
             ],

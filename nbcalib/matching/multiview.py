@@ -10,7 +10,12 @@ show almost nothing (a Livox's back side) are skipped.
 Each view is matched with the camera image (:func:`nbcalib.matching.match_images`), its
 keypoints are lifted through the view's own index map (nearest filled pixel within
 ``search_radius``), and rotation-only RANSAC (:func:`~nbcalib.initial_guess.ransac.
-estimate_rotation_ransac`) counts the view's support. The view with the most RANSAC inliers
+estimate_rotation_ransac`) counts the view's support. A learned matcher's attention costs about
+a second a view; with ``screen_views`` (default 4) every view is first matched by its
+descriptors' mutual nearest neighbours (a tenth of that), and the matcher runs on the
+``screen_views`` views with the most RANSAC support of that screen, and on the views whose
+screened rotation agrees with the first's (the views the pool will keep), only. The camera
+image's features are extracted once for all views. The view with the most RANSAC inliers
 wins; the views whose own RANSAC rotation agrees with the winner's (within ``pool_angle_deg``)
 add their correspondences (``pool=True``): overlapping views see the same structures at other
 places of their images. With ``refine=True`` the pose those correspondences give is estimated,
@@ -61,6 +66,10 @@ class ViewMatches:
         The view's RANSAC rotation (None with fewer than 3 correspondences).
     ransac_inliers : int
         Its RANSAC support (0 without).
+    screened : bool
+        Matched only by the sweep's screen (descriptors' mutual nearest neighbours,
+        ``MatchConfig.screen_views``): its numbers rank the views, its correspondences are
+        never kept.
     """
 
     view: object
@@ -68,6 +77,7 @@ class ViewMatches:
     correspondences: Correspondences
     R_camera_lidar: np.ndarray | None
     ransac_inliers: int
+    screened: bool = False
 
 
 @dataclass(frozen=True)
@@ -99,6 +109,8 @@ class MultiViewMatches:
         lines = []
         for k, v in enumerate(self.views):
             mark = " <- best" if k == self.best else (" (pooled)" if k in self.pooled else "")
+            if v.screened:
+                mark = " (screened out)"
             lines.append(
                 f"view {k:2d} heading {v.view.heading_deg:7.1f} deg, fill "
                 f"{v.view.fill_fraction:4.2f}: {v.matches.num_matches:4d} matches, "
@@ -108,9 +120,25 @@ class MultiViewMatches:
 
 
 def _view_matches(
-    camera, image, view, points, config, model_dir, search_radius, name, ransac_threshold, seed
+    camera,
+    image,
+    view,
+    points,
+    config,
+    model_dir,
+    search_radius,
+    name,
+    ransac_threshold,
+    seed,
+    *,
+    screen=False,
+    cache=None,
 ) -> ViewMatches:
-    """Match one view, lift its keypoints, count its rotation-only RANSAC support."""
+    """Match one view, lift its keypoints, count its rotation-only RANSAC support.
+
+    ``screen``: by the descriptors' mutual nearest neighbours (:func:`~nbcalib.matching.match.
+    match_images`); ``cache``: the camera image's features, shared by the views.
+    """
     from nbcalib.errors import InputError
     from nbcalib.initial_guess.ransac import estimate_rotation_ransac
     from nbcalib.matching.match import match_images
@@ -122,6 +150,8 @@ def _view_matches(
         camera_scale=view.scale,
         lidar_fill_radius=0,  # the view is filled already, with its index map
         model_dir=model_dir,
+        screen=screen,
+        cache=cache,
     )
     uv_c, uv_v, conf = m.matched()
     corr = lift_matches(
@@ -141,7 +171,28 @@ def _view_matches(
             R_best, support = ransac.R_camera_lidar, ransac.n_inliers
         except InputError:  # too few usable correspondences
             pass
-    return ViewMatches(view, m, corr, R_best, support)
+    return ViewMatches(view, m, corr, R_best, support, screened=bool(m.info.get("screen")))
+
+
+def _screened_choice(results: list[ViewMatches], cfg: MatchConfig) -> set[int]:
+    """The screened views the learned matcher then runs on.
+
+    The ``screen_views`` with the most RANSAC support of the screen, and every view whose own
+    RANSAC rotation agrees with the first's as the pool asks (``pool_angle_deg``,
+    ``min_pool_support``): the views the pool will keep. A camera that sees all around (an
+    equirectangular one) agrees in every view: pooling four of its twelve left too few
+    correspondences for a precise guess, one synthetic guess of 35 refused (docs/BENCHMARKS.md
+    10).
+    """
+    ranked = sorted(range(len(results)), key=lambda k: -results[k].ransac_inliers)
+    chosen = set(ranked[: cfg.screen_views])
+    R0 = results[ranked[0]].R_camera_lidar if ranked else None
+    if cfg.pool and R0 is not None:
+        for k, v in enumerate(results):
+            if v.R_camera_lidar is not None and v.ransac_inliers >= cfg.min_pool_support:
+                if rotation_angle_deg(R0.T @ v.R_camera_lidar) < cfg.pool_angle_deg:
+                    chosen.add(k)
+    return chosen
 
 
 def _refined_view(camera, corr, guess_config, seed, render, match) -> ViewMatches | None:
@@ -213,7 +264,7 @@ def match_views(
         Exported models.
     progress : callable, optional
         Called as ``progress(done, total)`` after each heading (rendered, and matched unless
-        it shows too little).
+        it shows too little), then after each view the screen sends to the matcher.
     **overrides
         Attributes of :class:`MatchConfig` to change for this call.
 
@@ -284,7 +335,9 @@ def match_views(
 
     fine_cfg = replace(cfg, max_keypoints=cfg.fine_max_keypoints)
 
-    def match(view, fine=False):
+    cache: dict = {}  # the camera image's features, extracted once for every view
+
+    def match(view, fine=False, screen=False):
         return _view_matches(
             camera,
             image,
@@ -296,18 +349,29 @@ def match_views(
             name,
             guess_config.ransac_threshold,
             seed,
+            screen=screen,
+            cache=cache,
         )
 
+    screen = cfg.screen_views > 0 and len(rotations) > cfg.screen_views and cfg.matcher != "sift"
+    total = len(rotations) + (cfg.screen_views if screen else 0)
     results: list[ViewMatches] = []
     for k, R in enumerate(rotations):
         view = render(R, None if translations is None else translations[k])
         if view.fill_fraction >= cfg.min_fill:
-            results.append(match(view))
+            results.append(match(view, screen=screen))
         if progress is not None:
-            progress(k + 1, len(rotations))
+            progress(k + 1, total)
+    if screen:  # the matcher on the views the screen ranks first, and on those agreeing
+        chosen = sorted(_screened_choice(results, cfg))
+        for n, k in enumerate(chosen):
+            results[k] = match(results[k].view)
+            if progress is not None:
+                progress(len(rotations) + n + 1, len(rotations) + len(chosen))
+    matched = [k for k, v in enumerate(results) if not v.screened]
     best = -1
-    if results:
-        best = int(np.argmax([v.ransac_inliers for v in results]))
+    if matched:
+        best = max(matched, key=lambda k: results[k].ransac_inliers)  # the first of equals
         if results[best].ransac_inliers == 0 and len(results[best].correspondences) == 0:
             best = -1
     pooled: tuple[int, ...] = ()
@@ -318,6 +382,7 @@ def match_views(
             for k, v in enumerate(results):
                 if (
                     k != best
+                    and not v.screened
                     and v.R_camera_lidar is not None
                     and v.ransac_inliers >= cfg.min_pool_support
                 ):
