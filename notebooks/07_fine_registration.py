@@ -296,6 +296,9 @@ def refine_by_hand(pairs, T_start, config):
                         T,
                         init_step=stage.nelder_mead_init_step * 2**level,
                         max_evaluations=40 * stage.max_inner,
+                        # stop once the simplex is 0.1 mm (coarser per level) and flat
+                        xatol=stage.nelder_mead_xatol * 2**level,
+                        fatol=stage.nelder_mead_fatol,
                         **box,
                     )
                 else:
