@@ -81,13 +81,14 @@ class AssessConfig:
         A median restart ending farther than this from the result in rotation means the
         result depends on where registration starts ("unstable").
     restart_points : int or None
-        Points of the pair each restart scores (a seeded subset of the visible ones, as fine
-        registration's ``points_per_pixel`` budget; a pair with fewer keeps them all). None:
-        fine registration's own budget. A restart asks where registration ends, not for its
-        last tenth of a millimetre: 50 000 points (fine registration's floor) took four
-        restarts of a synthetic spinning64 x pinhole pair 4.6 times less time and ended them
-        a median 0.18 cm / 0.014 deg from the result (0.07 cm / 0.010 deg with its 307 000;
-        25 000: 0.79 cm / 0.092 deg; docs/BENCHMARKS.md 10).
+        Points of the pair each restart scores at most (a seeded subset of the visible ones,
+        as fine registration's ``points_per_pixel`` budget; a pair with fewer keeps them all).
+        None (default): fine registration's own budget. 50 000 points made four restarts of a
+        synthetic spinning64 x pinhole pair 4.6 times cheaper, ending a median 0.18 cm / 0.014
+        deg from the result, and left the real coverage of docs/BENCHMARKS.md 11 as it was,
+        but a Livox x pinhole pair's restarts then scattered to a "flat cost" (8.7 cm stated)
+        on a good result; 100 000 kept it ok (0.74 cm) with its report 34 -> 25 s, not yet
+        measured at scale (docs/BENCHMARKS.md 10).
     """
 
     confidence: float = 0.95
@@ -138,7 +139,7 @@ class AssessConfig:
     restart_rotation_deg: float = 1.0
     restart_scale: float = 3.0
     max_restart_rotation_deg: float = 0.2
-    restart_points: int | None = 50_000
+    restart_points: int | None = None
 
     def __post_init__(self):
         if not 0.0 < self.confidence < 1.0:

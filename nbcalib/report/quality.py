@@ -48,8 +48,8 @@ minima within a degree of each other; which one fine registration finds depends 
 and neither the curvature nor the jackknife at the result sees the others. Fine registration is
 run again, for a single pair, from :attr:`AssessConfig.restarts` starts around the result
 (:func:`restart_starts`: turned by exactly ``restart_rotation_deg``, moved by exactly
-``restart_translation``, seeded directions; each scores ``restart_points`` of the pair's
-points); ``restart_scale`` times the mean outer product of
+``restart_translation``, seeded directions; each scores at most ``restart_points`` of the
+pair's points when set); ``restart_scale`` times the mean outer product of
 where they end (:attr:`Quality.restart_offsets`) joins the covariance, and a median end farther
 than ``max_restart_rotation_deg`` in rotation makes the result suspect. Synthetic pairs'
 restarts come back to within 0.3 cm / 0.01 deg; real ones end centimetres and tenths of a degree
