@@ -68,7 +68,7 @@ def work_folder(name: str) -> Path:
     """An empty folder ``work/NAME`` where the notebook runs, for what it writes.
 
     In JupyterLab a notebook runs in its own folder, so the work directories and reports it
-    writes are in ``notebooks/work/NAME`` (ignored by git), where the lab's file browser opens
+    writes are in its folder's ``work/NAME`` (ignored by git), where the lab's file browser opens
     them. Emptied first: each run starts afresh and the last run's files never pile up.
     """
     import shutil

@@ -290,7 +290,7 @@ print(f"read as wxyz by mistake, the rotation is {wxyz_mistake_deg:.0f} deg off"
 # `CalibFile.set_T_camera_lidar` writes the inverse, `get_T_camera_lidar` reads it back.
 
 # %%
-work = work_folder("00_frames_and_transforms").resolve()  # notebooks/work/00_..., emptied
+work = work_folder("00_frames_and_transforms").resolve()  # work/00_... here, emptied
 calib = make_calib(seq.camera, ["pair_000"])  # a fresh calib.json, as nbcalib preprocess makes
 calib.set_T_camera_lidar("T_lidar_camera", T_camera_lidar)
 write_calib_json(work / "calib.json", calib)

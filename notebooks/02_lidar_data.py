@@ -74,7 +74,7 @@ config = RigConfig(
     duration=0.3 if QUICK else 1.0,
     image_size=(640, 480) if QUICK else (1280, 960),
 )
-recording = work_folder("02_lidar_data").resolve()  # notebooks/work/02_lidar_data, emptied
+recording = work_folder("02_lidar_data").resolve()  # work/02_lidar_data here, emptied
 truth = export_dataset(config, recording / "files", fmt="files")
 for path in sorted((recording / "files").rglob("*")):
     if path.is_file():

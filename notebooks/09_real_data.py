@@ -75,7 +75,7 @@ DATA = real_data_dir()  # $NBCALIB_REAL_DATA, else ../shared/data/real beside th
 KITTI_DIR = DATA / "kitti_raw_2011_09_26"
 PJLAB_DIR = DATA / "pjlab" / "auto_calib"
 REAL = KITTI_DIR.is_dir() and PJLAB_DIR.is_dir()
-TMP = work_folder("09_real_data")  # work directories: notebooks/work/09_real_data, emptied first
+TMP = work_folder("09_real_data")  # work directories: work/09_real_data here, emptied first
 
 if REAL:
     print(f"real data from {DATA}")

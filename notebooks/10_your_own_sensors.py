@@ -50,7 +50,7 @@ from nbcalib.teaching import is_quick, plotter, real_data_dir, show, work_folder
 from nbcalib.workdir import WorkDir, get_virtual_camera
 
 QUICK = is_quick()
-TMP = work_folder("10_your_own_sensors")  # all it writes: notebooks/work/10_..., emptied first
+TMP = work_folder("10_your_own_sensors")  # all it writes: work/10_... here, emptied first
 print("working in", TMP)
 
 # %% [markdown]
