@@ -181,23 +181,28 @@ def test_refine_config_rejects_bad_pyramid():
         RefineConfig(pyramid_levels=-1)
 
 
-def test_lbfgs_ftol_reaches_the_optimiser(rng):
-    """A tighter relative-reduction stop lets L-BFGS run longer; a bad one is refused."""
+def _small_textured_pair(rng) -> RegistrationPair:
     cam = example_camera("plumb_bob", 160, 120)
     image, points, intensities = textured_scene(cam, rng, n=4000, blur=1.5)
-    pair = RegistrationPair(cam, image, points, intensities)
+    return RegistrationPair(cam, image, points, intensities)
+
+
+def _first_outer_evaluations(pair, **settings) -> int:
+    """Evaluations of one outer iteration at full resolution from a fixed start."""
     T_start = se3_exp(np.array([0.01, -0.01, 0.0, 0.004, 0.0, -0.003]))
-    evaluations = {}
-    for ftol in (1e-3, 1e-12):
-        config = RefineConfig(
-            optimizer="lbfgs",
-            pyramid_levels=0,
-            hidden_point_removal=False,
-            parallel=False,
-            lbfgs_ftol=ftol,
-            max_outer=1,
-        )
-        evaluations[ftol] = refine([pair], T_start, config).history[0].evaluations
+    config = RefineConfig(
+        pyramid_levels=0, hidden_point_removal=False, parallel=False, max_outer=1, **settings
+    )
+    return refine([pair], T_start, config).history[0].evaluations
+
+
+def test_lbfgs_ftol_reaches_the_optimiser(rng):
+    """A tighter relative-reduction stop lets L-BFGS run longer; a bad one is refused."""
+    pair = _small_textured_pair(rng)
+    evaluations = {
+        ftol: _first_outer_evaluations(pair, optimizer="lbfgs", lbfgs_ftol=ftol)
+        for ftol in (1e-3, 1e-12)
+    }
     assert evaluations[1e-12] > evaluations[1e-3], evaluations
     with pytest.raises(ValueError, match="lbfgs_ftol"):
         RefineConfig(lbfgs_ftol=0.0)
@@ -206,22 +211,13 @@ def test_lbfgs_ftol_reaches_the_optimiser(rng):
 def test_nelder_mead_tolerances_reach_the_optimiser(rng):
     """SciPy's own stops (1e-6, 1e-8) make Nelder-Mead shrink its simplex far longer than the
     default's; a bad one is refused."""
-    cam = example_camera("plumb_bob", 160, 120)
-    image, points, intensities = textured_scene(cam, rng, n=4000, blur=1.5)
-    pair = RegistrationPair(cam, image, points, intensities)
-    T_start = se3_exp(np.array([0.01, -0.01, 0.0, 0.004, 0.0, -0.003]))
-    evaluations = {}
-    for xatol, fatol in ((1e-6, 1e-8), (1e-4, 1e-5)):
-        config = RefineConfig(
-            optimizer="nelder_mead",
-            pyramid_levels=0,
-            hidden_point_removal=False,
-            parallel=False,
-            nelder_mead_xatol=xatol,
-            nelder_mead_fatol=fatol,
-            max_outer=1,
+    pair = _small_textured_pair(rng)
+    evaluations = {
+        fatol: _first_outer_evaluations(
+            pair, optimizer="nelder_mead", nelder_mead_xatol=xatol, nelder_mead_fatol=fatol
         )
-        evaluations[fatol] = refine([pair], T_start, config).history[0].evaluations
+        for xatol, fatol in ((1e-6, 1e-8), (1e-4, 1e-5))
+    }
     assert evaluations[1e-8] > evaluations[1e-5], evaluations
     with pytest.raises(ValueError, match="nelder_mead_xatol"):
         RefineConfig(nelder_mead_fatol=0.0)
