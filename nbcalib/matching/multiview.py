@@ -186,13 +186,28 @@ def _screened_choice(results: list[ViewMatches], cfg: MatchConfig) -> set[int]:
     """
     ranked = sorted(range(len(results)), key=lambda k: -results[k].ransac_inliers)
     chosen = set(ranked[: cfg.screen_views])
-    R0 = results[ranked[0]].R_camera_lidar if ranked else None
-    if cfg.pool and R0 is not None:
-        for k, v in enumerate(results):
-            if v.R_camera_lidar is not None and v.ransac_inliers >= cfg.min_pool_support:
-                if rotation_angle_deg(R0.T @ v.R_camera_lidar) < cfg.pool_angle_deg:
-                    chosen.add(k)
+    if ranked:
+        chosen.update(_agreeing(results, ranked[0], cfg))
     return chosen
+
+
+def _agreeing(results: list[ViewMatches], first: int, cfg: MatchConfig) -> list[int]:
+    """The views other than ``first`` whose RANSAC rotation agrees with its rotation.
+
+    The pool's rule: within ``pool_angle_deg``, with ``min_pool_support`` inliers at least;
+    none when ``pool`` is off or ``first`` has no rotation.
+    """
+    R0 = results[first].R_camera_lidar
+    if not cfg.pool or R0 is None:
+        return []
+    return [
+        k
+        for k, v in enumerate(results)
+        if k != first
+        and v.R_camera_lidar is not None
+        and v.ransac_inliers >= cfg.min_pool_support
+        and rotation_angle_deg(R0.T @ v.R_camera_lidar) < cfg.pool_angle_deg
+    ]
 
 
 def _refined_view(camera, corr, guess_config, seed, render, match) -> ViewMatches | None:
@@ -376,18 +391,8 @@ def match_views(
             best = -1
     pooled: tuple[int, ...] = ()
     if best >= 0:
-        keep = [best]
-        R0 = results[best].R_camera_lidar
-        if cfg.pool and R0 is not None:
-            for k, v in enumerate(results):
-                if (
-                    k != best
-                    and not v.screened
-                    and v.R_camera_lidar is not None
-                    and v.ransac_inliers >= cfg.min_pool_support
-                ):
-                    if rotation_angle_deg(R0.T @ v.R_camera_lidar) < cfg.pool_angle_deg:
-                        keep.append(k)
+        # the views the pool keeps: those agreeing with the best, matched in full
+        keep = [best, *(k for k in _agreeing(results, best, cfg) if not results[k].screened)]
         pooled = tuple(keep)
         corr = pool_correspondences([results[k].correspondences for k in keep])
         if cfg.refine_view:
