@@ -75,7 +75,7 @@ class RefineConfig:
         pyramid level: 1e-4, a tenth of a millimetre) and its values this close (NID units:
         1e-5). The hard NID is a step function of the pose; with SciPy's 1e-8 the simplex
         went on shrinking far below the precision an outer iteration's stop asks for (1 mm,
-        0.01 degree): a third of the evaluations for the same result (docs/BENCHMARKS.md 10).
+        0.01 degree): about a third fewer evaluations, the same errors (docs/BENCHMARKS.md 5.3).
     pyramid_levels : int
         Coarse levels above the full-resolution image (0: full resolution only, as the
         reference). Level ``k`` halves the image ``k`` times; see the module docstring. Levels
