@@ -273,13 +273,27 @@ class Calibrator:
         self._remember("preprocess", calib)
 
     def _match(self) -> None:
-        from nbcalib.matching.find import find_correspondences
+        from nbcalib.matching.find import agreeing_pairs, find_correspondences, unmatched_pair
 
         camera, cfg = self._camera(), self.config
         prior = self._prior.T_camera_lidar if self._prior is not None else None
         self.matches = {}
         pairs = self._pairs()
+        # many pairs: match them in turn until a few agree on the pose (matching.guess_pairs)
+        subset = cfg.matching.guess_pairs if 0 < cfg.matching.guess_pairs < len(pairs) else 0
+        agreed = None
         for k, pair in enumerate(pairs):
+            if agreed is not None:
+                found = unmatched_pair(
+                    pair,
+                    self._matcher_name(),
+                    f"{len(agreed)} matched pairs already agree on the pose (matching.guess_pairs "
+                    f"{subset}; --guess-pairs 0 matches every pair)",
+                )
+                self.matches[pair.name] = found
+                if self.work is not None:
+                    self.work.write_matches(found, pair, draw=False)
+                continue
             log.info("    [%d/%d] %s", k + 1, len(pairs), pair.name)
             found = find_correspondences(
                 camera,
@@ -296,6 +310,18 @@ class Calibrator:
             self.matches[pair.name] = found
             if self.work is not None:
                 self.work.write_matches(found, pair, draw=cfg.matching.draw)
+            if subset:
+                agreed = agreeing_pairs(
+                    list(self.matches.values()), subset, cfg.matching.pool_angle_deg
+                )
+                if agreed is not None and k + 1 < len(pairs):
+                    log.info(
+                        "    %d pairs agree on the pose (%s): the other %d are not matched "
+                        "(--guess-pairs 0 matches every pair)",
+                        len(agreed),
+                        ", ".join(pairs[i].name for i in agreed),
+                        len(pairs) - k - 1,
+                    )
         self._forget_after("find-matches")
         self._remember("find-matches", self._calib())
 

@@ -117,6 +117,13 @@ class MatchConfig:
         Agreement of two views' RANSAC rotations, degrees.
     min_pool_support : int
         RANSAC inliers a view needs to be pooled.
+    guess_pairs : int
+        A job of more pairs than this matches its pairs in turn until this many have each
+        found a pose with their own matches and agree on its rotation (within
+        ``pool_angle_deg``, the pool's rule); the rest are not matched, and the initial guess
+        is estimated from the matched ones (0: every pair is matched). A pair's matching costs
+        about ten seconds; fifteen pairs' guess needs no more than a few (docs/BENCHMARKS.md,
+        section 10).
     refine_view : bool
         Estimate the pose from the kept correspondences and, when that succeeds, render and
         match one more view from that pose (no parallax left).
@@ -153,6 +160,7 @@ class MatchConfig:
     pool: bool = True
     pool_angle_deg: float = 2.0
     min_pool_support: int = 6
+    guess_pairs: int = 2
     refine_view: bool = True
     draw: bool = True
 
@@ -191,7 +199,7 @@ class MatchConfig:
             value = getattr(self, name)
             if value is not None and value < 1:
                 raise ValueError(f"{name} must be >= 1, got {value}")
-        for name in ("fill_radius", "median", "views", "screen_views"):
+        for name in ("fill_radius", "median", "views", "screen_views", "guess_pairs"):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
         for name in ("search_radius", "splat_pixels_at_1m", "pool_angle_deg"):

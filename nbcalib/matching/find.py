@@ -31,7 +31,13 @@ from nbcalib.matching.config import MatchConfig
 from nbcalib.matching.correspondences import Correspondences, correspondences_from_matches
 from nbcalib.matching.matches import Matches
 
-__all__ = ["PairMatches", "find_correspondences", "reference_matches"]
+__all__ = [
+    "PairMatches",
+    "agreeing_pairs",
+    "find_correspondences",
+    "reference_matches",
+    "unmatched_pair",
+]
 
 log = logging.getLogger(__name__)
 
@@ -60,6 +66,9 @@ class PairMatches:
         guess passed (``MatchConfig.retry_pixels_per_degree``).
     kept_attempt : int or None
         The attempt whose correspondences were kept.
+    guess_rotation : ndarray of shape (3, 3) or None
+        ``R_camera_lidar`` of the kept attempt's own initial guess when that guess found the
+        pose (``InitialGuess.found``), else None: what :func:`agreeing_pairs` compares.
     """
 
     name: str
@@ -70,10 +79,18 @@ class PairMatches:
     seconds: float = 0.0
     attempts: tuple = ()
     kept_attempt: int | None = None
+    guess_rotation: np.ndarray | None = None
+
+    @property
+    def matched(self) -> bool:
+        """False for a pair left unmatched (:func:`unmatched_pair`)."""
+        return self.matches.info.get("mode") != "skipped"
 
     def summary(self) -> str:
         """One line: what was matched and kept."""
         corr = self.correspondences
+        if not self.matched:
+            return f"{self.name}: not matched ({self.matches.info.get('reason', '')})"
         if self.views is not None:
             mv = self.views
             best = mv.views[mv.best] if mv.best >= 0 else None
@@ -212,6 +229,7 @@ def find_correspondences(
             for ppd in cfg.retry_pixels_per_degree
         ]
         best = None
+        rotations = []
         with Progress(label=f"find-matches {pair.name}", enabled=progress) as display:
             for i, attempt in enumerate(settings):
                 offset = display.done
@@ -234,7 +252,8 @@ def find_correspondences(
                     model_dir=model_dir,
                     progress=view_done,
                 )
-                ok, support = _guess_passes(camera, found.correspondences, guess_config, seed)
+                ok, support, R = _guess_passes(camera, found.correspondences, guess_config, seed)
+                rotations.append(R if ok else None)
                 attempts.append(
                     {
                         "pixels_per_degree": attempt.pixels_per_degree,
@@ -293,19 +312,61 @@ def find_correspondences(
     seconds = time.perf_counter() - t0
     info["seconds"] = round(seconds, 3)
     matches = reference_matches(corr, pair.lidar_index, matcher=matcher, info=info)
+    kept = info.get("kept_attempt")
     return PairMatches(
-        pair.name, corr, matches, matcher, views, seconds, tuple(attempts), info.get("kept_attempt")
+        pair.name,
+        corr,
+        matches,
+        matcher,
+        views,
+        seconds,
+        tuple(attempts),
+        kept,
+        rotations[kept] if kept is not None else None,
     )
 
 
-def _guess_passes(camera, corr: Correspondences, guess_config, seed: int) -> tuple[bool, int]:
-    """(passes the success test, support) of the initial guess from one pair's matches."""
+def unmatched_pair(pair, matcher: str, reason: str) -> PairMatches:
+    """The record of a pair that was not matched: no correspondences, ``reason`` in its info.
+
+    A multi-pair job matches its pairs until a few agree (:func:`agreeing_pairs`,
+    ``MatchConfig.guess_pairs``); the rest keep empty matching products, so that the work
+    directory is complete (the reference toolbox's ``initial_guess_auto`` reads a matches
+    file per pair) and says why they are empty.
+    """
+    corr = Correspondences.empty([pair.name])
+    info = {"mode": "skipped", "reason": reason, "seconds": 0.0}
+    matches = reference_matches(corr, pair.lidar_index, matcher=matcher, info=info)
+    return PairMatches(pair.name, corr, matches, matcher)
+
+
+def agreeing_pairs(found, count: int, angle_deg: float) -> list[int] | None:
+    """``count`` or more matched pairs whose own guesses agree on the rotation, or None.
+
+    ``found``: the pairs matched so far (:class:`PairMatches`). A pair counts when its own
+    matches found a pose (:attr:`PairMatches.guess_rotation`); pairs agree when their rotations
+    are within ``angle_deg`` of one pair's (the pool's rule for views). Returns the indices of
+    the largest such group (the first pair's group on a tie) when it holds at least ``count``.
+    """
+    from nbcalib.transforms import rotation_angle_deg
+
+    rotations = [(k, f.guess_rotation) for k, f in enumerate(found) if f.guess_rotation is not None]
+    best: list[int] = []
+    for _, R0 in rotations:
+        group = [k for k, R in rotations if rotation_angle_deg(R0.T @ R) < angle_deg]
+        if len(group) > len(best):
+            best = group
+    return best if count > 0 and len(best) >= count else None
+
+
+def _guess_passes(camera, corr: Correspondences, guess_config, seed: int):
+    """(found the pose, support, R_camera_lidar) of the initial guess from one pair's matches."""
     from nbcalib.initial_guess.config import InitialGuessConfig
     from nbcalib.initial_guess.estimate import MIN_CORRESPONDENCES, estimate_initial_guess
 
     cfg = guess_config or InitialGuessConfig()
     if len(corr) < MIN_CORRESPONDENCES:
-        return False, 0
+        return False, 0, None
     guess = estimate_initial_guess(
         camera,
         corr.uv_camera,
@@ -315,4 +376,4 @@ def _guess_passes(camera, corr: Correspondences, guess_config, seed: int) -> tup
         weights=corr.weights if cfg.confidence_weights else None,
     )
     # did this attempt find the pose? (precision is the initial-guess stage's test)
-    return bool(guess.found), int(guess.support)
+    return bool(guess.found), int(guess.support), guess.T_camera_lidar[:3, :3].copy()
