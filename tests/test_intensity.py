@@ -46,6 +46,22 @@ def test_ties_share_one_level_at_the_mid_rank(rng):
     assert np.array_equal(equalize_point_intensities(ints[perm]), levels[perm])
 
 
+@pytest.mark.parametrize("dtype", [np.uint8, np.uint16, np.int32, np.float32, np.float64])
+def test_whole_numbers_counted_by_value_equal_the_sorted_path(dtype, rng):
+    """Whole-number intensities take np.bincount (_value_counts), others np.unique: the same
+    levels as the sorted path on the same values, ties and gaps in the values included."""
+    from nbcalib.preprocess import intensity
+
+    x = rng.choice([0, 3, 7, 8, 200, 255], size=20_000).astype(dtype)
+    levels = equalize_point_intensities(x)
+    counted, _ = intensity._value_counts(x)
+    assert counted.max() == 255  # counted by value, not ranked by a sort
+    sorted_path = equalize_point_intensities(x.astype(np.float64) + 0.25)  # not whole: np.unique
+    assert np.array_equal(levels, sorted_path)
+    halves = x.astype(np.float64) / 2  # 1.5, 3.5, 127.5: not whole numbers, so sorted
+    assert np.array_equal(equalize_point_intensities(halves), levels)
+
+
 def test_levels_are_in_range_and_spread(rng):
     x = rng.exponential(size=100_000)
     out = equalize_point_intensities(x)
