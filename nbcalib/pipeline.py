@@ -35,6 +35,7 @@ import time
 
 import numpy as np
 
+from nbcalib._threads import thread_map
 from nbcalib.config import CalibrationConfig, config_to_dict, write_config
 from nbcalib.errors import InputError
 from nbcalib.io.calib_json import AUTO_STAGE, FINAL_STAGE, MANUAL_STAGE
@@ -238,11 +239,13 @@ class Calibrator:
             self.work.prepare()
         self.camera, self._data_path, self._topics = camera, data_path, pair_inputs[0].topics
         self._inputs_record = self._inputs.to_dict()
-        pairs = []
-        for k, pair in enumerate(pair_inputs):
-            log.info("    [%d/%d] %s", k + 1, len(pair_inputs), pair.name)
-            pairs.append(prepare_pair(pair, self.config.preprocess, log=_detail))
-        return pairs
+        one = len(pair_inputs) == 1
+
+        def prepare(pair):  # pairs on every core (nbcalib._threads); a bar only for one pair
+            log.info("    %s", pair.name)
+            return prepare_pair(pair, self.config.preprocess, log=_detail, progress=one)
+
+        return thread_map(prepare, pair_inputs)
 
     def _render(self, pairs) -> None:
         from nbcalib.preprocess.prepare import render_pairs
@@ -252,8 +255,7 @@ class Calibrator:
         self._forget_after("preprocess")
         if self.work is None:
             return self._remember("preprocess")
-        for pair in self.pairs:
-            self.work.write_pair(pair)
+        thread_map(self.work.write_pair, self.pairs)
         topics = self._topics
         calib = make_calib(
             self.camera,

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -388,6 +389,63 @@ def test_points_per_pixel_budget_has_a_floor_and_is_validated(rng):
     )
     assert small.costs[0].xyz.shape[1] < 0.2 * full.costs[0].xyz.shape[1]
     assert abs(small.value(T) - full.value(T)) < 0.05  # a noisier estimate of the same NID
-    for bad in ({"points_per_pixel": 0.0}, {"points_per_pixel": -1.0}, {"min_sampled_points": 0}):
+    bad_values = (
+        {"points_per_pixel": 0.0},
+        {"points_per_pixel": -1.0},
+        {"min_sampled_points": 0},
+        {"job_points": 0},
+    )
+    for bad in bad_values:
         with pytest.raises(ValueError):
             RefineConfig(**bad)
+
+
+def test_a_job_of_many_pairs_shares_its_point_budget(rng):
+    """refine.job_points: each of K pairs uses at most job_points / K points (never fewer than
+    min_sampled_points); one pair of an ordinary camera keeps its own budget, and the report's
+    per-pair cost of a K-pair job is built on the same share as fine registration's."""
+    from nbcalib.registration.costs import point_budget
+
+    cam = example_camera("plumb_bob", 320, 240)
+    own = RefineConfig(points_per_pixel=0.25, min_sampled_points=10_000, job_points=None)
+    assert point_budget(cam, own, 15) == max(0.25 * 320 * 240, 10_000) == 19_200
+    shared = replace(own, job_points=60_000)
+    assert point_budget(cam, shared, 1) == 19_200  # one pair: its own budget binds
+    assert point_budget(cam, shared, 6) == 10_000  # a sixth of 60 000
+    assert point_budget(cam, shared, 15) == 10_000  # never below min_sampled_points
+    assert point_budget(cam, replace(shared, points_per_pixel=None), 4) == 15_000
+    assert point_budget(cam, replace(own, points_per_pixel=None), 4) is None
+
+    image, points, intensities = textured_scene(cam, rng, n=60000, blur=0.8)
+    pair = RegistrationPair(cam, image, points, intensities)
+    T = se3_exp(np.array([0.01, 0.0, 0.0, 0.0, 0.005, 0.0]))
+    config = RefineConfig(orientation_classes=False, min_sampled_points=5_000, job_points=30_000)
+    alone, _ = build_cost([pair], T, config)
+    three, _ = build_cost([pair, pair, pair], T, config)
+    one_of_three, _ = build_cost([pair], T, config, n_pairs=3)
+    n_alone = alone.costs[0].xyz.shape[1]
+    assert three.costs[0].xyz.shape[1] == one_of_three.costs[0].xyz.shape[1] < 0.7 * n_alone
+    assert one_of_three.value(T) == three.costs[0].value(T)
+
+
+def test_pairs_costs_built_on_every_core_equal_one_after_another(rng, monkeypatch):
+    """build_cost makes each pair's z-buffer, subset and terms on threads (nbcalib._threads):
+    the same points, in the same order, and the same cost as one pair after another."""
+    from nbcalib import _threads
+
+    cam = example_camera("plumb_bob", 320, 240)
+    pairs = []
+    for k in range(3):
+        image, points, intensities = textured_scene(cam, rng, n=30000, blur=0.8)
+        pairs.append(RegistrationPair(cam, image, points, intensities, f"p{k}"))
+    T = se3_exp(np.array([0.01, 0.0, 0.0, 0.0, 0.005, 0.0]))
+    built = {}
+    for workers in (1, 2):
+        monkeypatch.setattr(_threads, "WORKERS", workers)
+        built[workers] = build_cost(pairs, T, RefineConfig(min_sampled_points=5000))
+    (one, counts_one), (two, counts_two) = built[1], built[2]
+    assert counts_one == counts_two and len(one.costs) == len(two.costs) == 3
+    for a, b in zip(one.costs, two.costs):
+        np.testing.assert_array_equal(a.xyz, b.xyz)
+    assert one.value_and_grad(T)[0] == two.value_and_grad(T)[0]
+    np.testing.assert_array_equal(one.value_and_grad(T)[1], two.value_and_grad(T)[1])

@@ -231,3 +231,32 @@ def test_real_bags(real_data, tmp_path, bag):
     calib = json.loads((work / "calib.json").read_text())
     assert calib["meta"]["points_topic"] == "/kitti/velo/pointcloud"
     assert calib["camera"]["camera_model"] in ("plumb_bob", "pinhole")
+
+
+def test_pairs_preprocessed_on_every_core_equal_one_after_another(tmp_path, monkeypatch):
+    """Bags are read, integrated, rendered and written on two threads (nbcalib._threads): the
+    work directory holds the same clouds, intensities and LiDAR images as one pair at a time."""
+    from nbcalib import _threads
+
+    data = tmp_path / "data"
+    synth = ["synth", str(data), "--lidar", "livox", "--camera", "pinhole", "--pairs", "3"]
+    assert main([*synth, "--format", "bag1", "--duration", "0.2", "--image-size", "128x96"]) == 0
+    bags = sorted(str(p) for p in data.glob("pair_*.bag"))
+    works = {}
+    for workers in (1, 2):
+        monkeypatch.setattr(_threads, "WORKERS", workers)
+        works[workers] = WorkDir(tmp_path / f"work{workers}")
+        assert main(["-q", "preprocess", *bags, str(works[workers].path)]) == 0
+    names = works[1].names()
+    assert names == works[2].names() and len(names) == 3
+    for name in names:
+        one, two = works[1].load_pair(name), works[2].load_pair(name)
+        np.testing.assert_array_equal(one.points_lidar, two.points_lidar)
+        np.testing.assert_array_equal(one.intensities, two.intensities)
+        np.testing.assert_array_equal(one.lidar_index, two.lidar_index)
+        np.testing.assert_array_equal(one.image, two.image)
+    summary = [
+        json.loads((w.path / "calib.json").read_text())["nbcalib"]["preprocess"]
+        for w in works.values()
+    ]
+    assert summary[0] == summary[1]

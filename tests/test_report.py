@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 from scipy.ndimage import gaussian_filter
 
+from nbcalib import _threads
 from nbcalib.camera import example_camera
 from nbcalib.cli import main
 from nbcalib.errors import MissingExtraError
@@ -401,6 +402,7 @@ def test_per_pair_optima_take_no_step_along_re_measured_directions(pair, monkeyp
         return _with_eigenvalue(H, v, -abs(v @ H @ v))
 
     monkeypatch.setattr(quality_module, "_hessian", noisy_hessian)
+    monkeypatch.setattr(_threads, "WORKERS", 1)  # the pairs in order: flipped[k] is pair k's
     T = se3_exp(np.array([0.01, -0.005, 0.008, 0.002, 0.0, -0.001]))  # off the minimum
     q = assess([pair, make_pair(2, name="b")], T)
     assert q.pair_remeasured.tolist() == [1, 1]
@@ -411,6 +413,33 @@ def test_per_pair_optima_take_no_step_along_re_measured_directions(pair, monkeyp
         n = q.pixels_covered[k]
         step = -(_newton_inverse(n * q.pair_hessians[k]) @ (n * q.pair_gradients[k]))
         assert abs(step @ v) > 1e-5
+
+
+def test_pairs_judged_on_every_core_equal_one_after_another(pair, monkeypatch):
+    """A many-pair report measures each pair's cost, Hessians and curves on threads
+    (nbcalib._threads): every figure equals the one-pair-at-a-time report's to the bit."""
+    T = se3_exp(np.array([0.01, -0.005, 0.008, 0.002, 0.0, -0.001]))
+    pairs = [pair, make_pair(2, name="b"), make_pair(3, name="c")]
+    judged = {}
+    for workers in (1, 2):
+        monkeypatch.setattr(_threads, "WORKERS", workers)
+        judged[workers] = assess(pairs, T).to_dict()
+    assert json.dumps(judged[1], sort_keys=True) == json.dumps(judged[2], sort_keys=True)
+
+
+def test_pixels_covered_from_the_z_buffer_equal_projecting_the_visible_points(pair):
+    """The report counts a pair's pixels from the z-buffer's own pixels: the same count as
+    projecting the visible points again and rounding them to pixels."""
+    from nbcalib.registration.refine import visible_subset
+    from nbcalib.report.quality import _pixels_covered
+
+    config = RefineConfig()
+    for T in (np.eye(4), se3_exp(np.array([0.03, -0.02, 0.01, 0.004, -0.003, 0.002]))):
+        keep = visible_subset(pair, T, config)
+        uv, valid = pair.camera.project(pair.points_lidar[keep] @ T[:3, :3].T + T[:3, 3])
+        pixels = np.floor(uv[valid] + 0.5).astype(np.int64)
+        expected = len(np.unique(pixels[:, 1] * pair.camera.width + pixels[:, 0]))
+        assert _pixels_covered(pair, T, config) == expected > 1000
 
 
 def test_assess_rejects_programming_errors(pair):

@@ -234,6 +234,9 @@ REFINE = (
     Option("--points-per-pixel", "refine.points_per_pixel",
            "points per camera pixel the NID uses at most, a fixed random subset of the "
            "visible points (none: all)", "P"),
+    Option("--job-points", "refine.job_points",
+           "points of all pairs together at most, an equal share each (none: no joint "
+           "limit)", "N"),
     Option("--max-outer", "refine.max_outer",
            "outer iterations at most, per pyramid level and per optimiser of the hybrid", "N"),
     Option("--depth-margin", "refine.depth_margin", "visibility depth margin, metres", "M"),

@@ -29,6 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
+from nbcalib._threads import thread_map
 from nbcalib.camera import CameraModel
 from nbcalib.errors import InputError
 from nbcalib.preprocess.config import PreprocessConfig
@@ -390,7 +391,8 @@ class InputSpec:
             pairs, data_path = self._gather_per_image(bags, clouds, images, config)
         elif bags:
             _check_all_scans(config, "a bag without --every, --pair-count or --image-times")
-            pairs = [gather_bag(b, config) for b in sorted(bags, key=lambda p: p.name)]
+            bags = sorted(bags, key=lambda p: p.name)  # read on every core (nbcalib._threads)
+            pairs = thread_map(lambda bag: gather_bag(bag, config), bags)
             data_path = str(Path(bags[0]).resolve().parent)
         else:
             if len(images) != 1:

@@ -21,6 +21,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from nbcalib._threads import thread_map
 from nbcalib.camera import CameraModel
 from nbcalib.errors import InputError
 from nbcalib.preprocess.config import PreprocessConfig
@@ -137,6 +138,7 @@ def prepare_pair(
     config: PreprocessConfig | None = None,
     *,
     log: Callable[[str], None] | None = None,
+    progress: bool = True,
 ) -> PairData:
     """One pair's dense cloud, equalised intensities and camera image (module docstring).
 
@@ -147,6 +149,8 @@ def prepare_pair(
     config : PreprocessConfig, optional
     log : callable, optional
         Receives progress lines.
+    progress : bool, optional
+        A progress display of the scans integrated (more than three scans).
 
     Returns
     -------
@@ -165,7 +169,7 @@ def prepare_pair(
     mode = choose_mode(pair, config)
     t0 = time.perf_counter()
     log(f"{pair.name}: {len(pair.scans)} scan(s), {mode} integration")
-    cloud = _accumulate(pair, mode, config, progress=len(pair.scans) > 3)
+    cloud = _accumulate(pair, mode, config, progress=progress and len(pair.scans) > 3)
     if len(cloud) == 0:
         raise InputError(
             f"pair '{pair.name}': no point left after accumulation "
@@ -232,12 +236,13 @@ def render_pairs(
         camera, T_vcam_lidar = make_virtual_camera(fov)
         virtual = VirtualCamera(camera, T_vcam_lidar, math.degrees(fov))
         log(f"LiDAR field of view {virtual.fov_deg:.1f} deg: {camera.model} virtual camera")
-    rendered = []
-    for pair in pairs:
+
+    def render(pair):
         image = render_lidar_image(
             virtual.camera, virtual.T_vcam_lidar, pair.points_lidar, pair.intensities
         )
         filled = int(np.count_nonzero(image.index >= 0))
         summary = {**(pair.summary or {}), "lidar_image_filled_pixels": filled}
-        rendered.append(replace(pair, lidar_image=image, summary=summary))
-    return virtual, rendered
+        return replace(pair, lidar_image=image, summary=summary)
+
+    return virtual, thread_map(render, pairs)  # every core (nbcalib._threads)

@@ -120,6 +120,11 @@ class RefineConfig:
     min_sampled_points : int
         The floor of ``points_per_pixel``'s budget (50 000): a pair with fewer visible points
         (a single real scan) keeps all of them at every level.
+    job_points : int or None
+        Points of all pairs of a job together at most: each pair uses at most an equal share
+        (never below ``min_sampled_points``; None: no joint limit). A single pair keeps its
+        own budget unless its camera has more than 4 million pixels; fifteen pairs use a
+        fifteenth each (docs/BENCHMARKS.md, section 10).
     min_visible_points : int
         Fewer LiDAR points than this in the images at a pose being refined is refused (a user
         error: the start looks away from the cloud, or the camera does not fit the images):
@@ -154,6 +159,7 @@ class RefineConfig:
     max_pairs: int | None = None
     points_per_pixel: float | None = 0.25
     min_sampled_points: int = 50_000
+    job_points: int | None = 1_000_000
     min_visible_points: int = 100
 
     def __post_init__(self):
@@ -189,6 +195,8 @@ class RefineConfig:
             raise ValueError(f"min_visible_points must be >= 1, got {self.min_visible_points}")
         if self.min_sampled_points < 1:
             raise ValueError(f"min_sampled_points must be >= 1, got {self.min_sampled_points}")
+        if self.job_points is not None and self.job_points < 1:
+            raise ValueError(f"job_points must be >= 1 or None, got {self.job_points}")
         if self.points_per_pixel is not None and not self.points_per_pixel > 0:
             raise ValueError(f"points_per_pixel must be > 0 or None, got {self.points_per_pixel}")
         if self.cost not in COSTS:

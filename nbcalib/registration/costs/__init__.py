@@ -35,12 +35,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from nbcalib._threads import thread_map
+
 if TYPE_CHECKING:  # this module is imported by the settings, which must not load numba
     from nbcalib.camera import CameraModel
     from nbcalib.registration.config import RefineConfig
     from nbcalib.registration.nid import MultiNIDCost
 
-__all__ = ["COSTS", "PairView", "build_cost", "pair_view"]
+__all__ = ["COSTS", "PairView", "build_cost", "pair_view", "point_budget"]
 
 #: The intensity terms by name (:attr:`RefineConfig.cost
 #: <nbcalib.registration.config.RefineConfig>`), each a module of this package whose
@@ -100,16 +102,34 @@ class PairView:
         return self.pair.camera.project(self.points @ T[:3, :3].T + T[:3, 3])
 
 
-def pair_view(pair, T_camera_lidar, config: RefineConfig, *, level: int = 0) -> PairView:
-    """The points of ``pair`` the terms use at ``T_camera_lidar`` (:class:`PairView`)."""
+def point_budget(camera: CameraModel, config: RefineConfig, n_pairs: int = 1) -> float | None:
+    """Points one pair of a job of ``n_pairs`` pairs uses at most (None: every visible one).
+
+    ``points_per_pixel`` of ``camera``'s pixels, at least ``min_sampled_points``; and at most
+    an equal share of ``job_points``, never below ``min_sampled_points``
+    (:class:`~nbcalib.registration.config.RefineConfig`).
+    """
+    budget = None
+    if config.points_per_pixel is not None:
+        pixels = camera.width * camera.height
+        budget = max(config.points_per_pixel * pixels, config.min_sampled_points)
+    if config.job_points is not None:
+        share = max(config.job_points / max(n_pairs, 1), config.min_sampled_points)
+        budget = share if budget is None else min(budget, share)
+    return budget
+
+
+def pair_view(
+    pair, T_camera_lidar, config: RefineConfig, *, level: int = 0, n_pairs: int = 1
+) -> PairView:
+    """The points of ``pair`` the terms use at ``T_camera_lidar`` (:class:`PairView`).
+
+    ``n_pairs``: how many pairs the job has (:func:`point_budget`).
+    """
     from nbcalib.registration.refine import downscale_camera, downscale_image, visible_subset
 
     full = pair.camera
-    budget = (
-        None
-        if config.points_per_pixel is None
-        else max(config.points_per_pixel * full.width * full.height, config.min_sampled_points)
-    )
+    budget = point_budget(full, config, n_pairs)
     n_visible = 0  # before the subset
 
     def subset(visible):
@@ -134,11 +154,18 @@ def pair_view(pair, T_camera_lidar, config: RefineConfig, *, level: int = 0) -> 
 
 
 def build_cost(
-    pairs: Sequence, T_camera_lidar, config: RefineConfig, *, level: int = 0
+    pairs: Sequence,
+    T_camera_lidar,
+    config: RefineConfig,
+    *,
+    level: int = 0,
+    n_pairs: int | None = None,
 ) -> tuple[MultiNIDCost, list[int]]:
     """The summed cost over ``pairs`` at the points visible from ``T_camera_lidar``.
 
     Visibility is tested with the full-resolution camera; the terms use pyramid ``level``.
+    ``n_pairs``: the pairs of the whole job, when ``pairs`` are some of them (default: their
+    number), for each pair's share of ``job_points`` (:func:`point_budget`).
     Each pair adds its intensity term (:attr:`RefineConfig.cost`, weight 1) and, when
     ``structure_weight > 0``, its structure term times that weight.
 
@@ -153,13 +180,18 @@ def build_cost(
     from nbcalib.registration.nid import MultiNIDCost
 
     intensity = importlib.import_module(COSTS[config.cost]).terms
-    costs, weights, counts = [], [], []
-    for pair in pairs:
-        view = pair_view(pair, T_camera_lidar, config, level=level)
-        counts.append(view.n_visible)
+    n_pairs = n_pairs or len(pairs)
+
+    def pair_terms(pair):  # one pair's z-buffer, subset and terms: independent of the others
+        view = pair_view(pair, T_camera_lidar, config, level=level, n_pairs=n_pairs)
         terms = intensity(view, config)
         if config.structure_weight > 0 and view.keep.size:
             terms += [(t, w * config.structure_weight) for t, w in structure.terms(view, config)]
+        return view.n_visible, terms
+
+    costs, weights, counts = [], [], []
+    for n_visible, terms in thread_map(pair_terms, pairs):  # pairs on every core
+        counts.append(n_visible)
         for term, weight in terms:
             costs.append(term)
             weights.append(weight)
