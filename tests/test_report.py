@@ -769,6 +769,8 @@ def test_restart_starts_are_exactly_the_stated_distance_away():
         assert dt == pytest.approx(0.05, abs=1e-9) and dr == pytest.approx(1.0, abs=1e-9)
     again = restart_starts(T, 5, 0.05, 1.0)  # seeded: the same result, the same starts
     np.testing.assert_array_equal(np.array(starts), np.array(again))
+    # fewer restarts are the first of more: a report can be judged again with fewer
+    np.testing.assert_array_equal(np.array(restart_starts(T, 2, 0.05, 1.0)), np.array(starts[:2]))
 
 
 def test_restarts_at_a_well_posed_result_come_back_and_stay_ok(quality_at_truth):
@@ -799,6 +801,11 @@ def test_restarts_that_end_elsewhere_widen_the_interval_and_make_it_suspect(qual
     near = replace(quality_at_truth, restart_offsets=ends * 0.1)
     assert not any("registration starts" in r for r in rejudge(near, c).reasons)
     assert rejudge(moved, replace(c, restarts=0)).verdict == "ok"
+    # judged with two restarts: the first two ends only (those two restarts would find)
+    two = rejudge(moved, replace(c, restarts=2))
+    added = c.restart_scale * (ends[:2] ** 2).mean(axis=0)
+    np.testing.assert_allclose(two.sigma**2 - base.sigma**2, added, rtol=1e-9, atol=1e-15)
+    assert two.restart_offsets.shape == (2, 6)
 
 
 def test_restarts_score_restart_points_of_the_pair(pair, monkeypatch):

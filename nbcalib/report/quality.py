@@ -604,8 +604,9 @@ def rejudge(quality: Quality, assess_config: AssessConfig) -> Quality:
         q.pair_offsets = offsets
         if jackknife is None:  # the blocks' spread holds the pairs' when there are blocks
             covariance = covariance + np.cov(offsets.T, ddof=1) / n_pairs
-    if not acfg.restarts:  # judged as if there had been none
-        q.restart_offsets = np.zeros((0, 6))
+    # judged as if there had been fewer: restart_starts are seeded, so the first k of the stored
+    # ends are exactly those k restarts would have found
+    q.restart_offsets = np.asarray(q.restart_offsets, dtype=np.float64)[: acfg.restarts]
     n_restarts = len(q.restart_offsets)
     if n_restarts:
         ends = np.asarray(q.restart_offsets, dtype=np.float64)
