@@ -42,7 +42,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import math
 import platform
 import resource
 import shlex
@@ -56,7 +55,7 @@ from pathlib import Path
 import numpy as np
 
 from nbcalib.io.calib_json import read_ground_truth
-from nbcalib.transforms import invert_T, make_T, pose_to_xyz_quat, so3_exp
+from nbcalib.transforms import invert_T, offset_pose, pose_to_xyz_quat
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
 
@@ -93,14 +92,9 @@ def checked(*args) -> subprocess.CompletedProcess:
     return run
 
 
-def offset_start(T_camera_lidar: np.ndarray, angle_deg: float, distance: float, rng) -> np.ndarray:
-    """The pose turned by exactly ``angle_deg`` and its camera centre moved by ``distance``."""
-    axis, direction = rng.standard_normal(3), rng.standard_normal(3)
-    axis /= np.linalg.norm(axis)
-    direction /= np.linalg.norm(direction)
-    T_lidar_camera = invert_T(T_camera_lidar)
-    R = so3_exp(math.radians(angle_deg) * axis) @ T_lidar_camera[:3, :3]
-    return invert_T(make_T(R, T_lidar_camera[:3, 3] + distance * direction))
+#: The pose turned by exactly ``angle_deg`` and its camera centre moved by ``distance``, seeded
+#: directions (nbcalib.transforms.offset_pose, as the report's restarts).
+offset_start = offset_pose
 
 
 def init_arg(T_camera_lidar: np.ndarray) -> str:

@@ -527,3 +527,23 @@ def test_validation_of_rigid_transforms():
 def test_bad_inputs_raise_value_error(call, message):
     with pytest.raises(ValueError, match=message):
         call()
+
+
+def test_offset_pose_is_exactly_the_asked_distance_and_angle_away():
+    """offset_pose: exactly angle_deg and distance from the pose (pose_error of the camera
+    poses), seeded by its generator (a generator continues its sequence, as several starts
+    drawn from one generator need), and the report's restarts are made by it."""
+    from nbcalib.report.quality import RESTART_SEED, restart_starts
+    from nbcalib.transforms import invert_T, offset_pose, pose_error, se3_exp
+
+    T = se3_exp(np.array([0.1, -0.2, 0.3, 0.2, -0.1, 0.05]))
+    gen = np.random.default_rng(7)
+    first, second = offset_pose(T, 1.5, 0.07, gen), offset_pose(T, 1.5, 0.07, gen)
+    for T0 in (first, second):
+        dt, dr = pose_error(invert_T(T0), invert_T(T))
+        assert dt == pytest.approx(0.07, abs=1e-12) and dr == pytest.approx(1.5, abs=1e-9)
+    assert not np.array_equal(first, second)  # the generator went on
+    np.testing.assert_array_equal(offset_pose(T, 1.5, 0.07, 7), first)  # a seed: a new one
+    gen = np.random.default_rng(RESTART_SEED)
+    made = [offset_pose(T, 1.0, 0.05, gen) for _ in range(3)]
+    np.testing.assert_array_equal(np.array(restart_starts(T, 3, 0.05, 1.0)), np.array(made))

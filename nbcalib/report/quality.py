@@ -111,7 +111,14 @@ from nbcalib.registration.refine import (
 )
 from nbcalib.registration.trust import on_trust_boundary
 from nbcalib.report.config import AssessConfig
-from nbcalib.transforms import invert_T, make_T, pose_error, se3_exp, se3_log, so3_exp, validate_T
+from nbcalib.transforms import (
+    invert_T,
+    offset_pose,
+    pose_error,
+    se3_exp,
+    se3_log,
+    validate_T,
+)
 
 __all__ = [
     "AXIS_NAMES",
@@ -673,15 +680,7 @@ def restart_starts(T_camera_lidar: np.ndarray, count: int, distance: float, angl
     exactly ``distance`` metres in a random direction.
     """
     rng = np.random.default_rng(RESTART_SEED)
-    T_lidar_camera = invert_T(T_camera_lidar)
-    starts = []
-    for _ in range(count):
-        axis, direction = rng.standard_normal(3), rng.standard_normal(3)
-        axis /= np.linalg.norm(axis)
-        direction /= np.linalg.norm(direction)
-        R = so3_exp(math.radians(angle_deg) * axis) @ T_lidar_camera[:3, :3]
-        starts.append(invert_T(make_T(R, T_lidar_camera[:3, 3] + distance * direction)))
-    return starts
+    return [offset_pose(T_camera_lidar, angle_deg, distance, rng) for _ in range(count)]
 
 
 def _restart_offsets(pairs, T: np.ndarray, config: RefineConfig, acfg: AssessConfig, step):

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 from nbcalib.transforms.poses import (
     interpolate_pose,
+    offset_pose,
     pose_error,
     random_pose,
     random_rotation,
@@ -70,6 +71,7 @@ __all__ = [
     "is_valid_T",
     "make_T",
     "matrix_to_quat_xyzw",
+    "offset_pose",
     "pose_error",
     "pose_from_xyz_quat",
     "pose_to_xyz_quat",

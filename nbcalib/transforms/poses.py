@@ -6,6 +6,8 @@ deskewing and continuous-time ICP); errors compare estimated and true transforms
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike
 
@@ -22,6 +24,7 @@ from nbcalib.transforms.validation import (
 
 __all__ = [
     "interpolate_pose",
+    "offset_pose",
     "pose_error",
     "random_pose",
     "random_rotation",
@@ -175,3 +178,32 @@ def random_pose(
     direction /= np.linalg.norm(direction, axis=1, keepdims=True)
     radius = max_translation * gen.random(n) ** (1.0 / 3.0)
     return _unbatch(_make_T(R, radius[:, None] * direction), size is None)
+
+
+def offset_pose(
+    T_camera_lidar: ArrayLike, angle_deg: float, distance: float, rng: np.random.Generator | int
+) -> FloatArray:
+    """A start exactly ``angle_deg`` and ``distance`` from ``T_camera_lidar``, in random directions.
+
+    The rotation of ``T_lidar_camera`` is turned by exactly ``angle_deg`` about a random axis
+    (in the LiDAR frame) and the camera centre moved by exactly ``distance`` metres in a random
+    direction, so that :func:`pose_error` of the result against the pose is exactly
+    ``(distance, angle_deg)``. ``rng`` (a generator, or the seed of a new one) draws the axis,
+    then the direction (three standard normals each). The report's restarts and the benchmarks'
+    starts are made this way.
+
+    Returns
+    -------
+    ndarray of shape (4, 4), float64
+        The offset ``T_camera_lidar``.
+    """
+    from nbcalib.transforms.se3 import invert_T, make_T
+    from nbcalib.transforms.so3 import so3_exp
+
+    gen = np.random.default_rng(rng)
+    axis, direction = gen.standard_normal(3), gen.standard_normal(3)
+    axis /= np.linalg.norm(axis)
+    direction /= np.linalg.norm(direction)
+    T_lidar_camera = invert_T(np.asarray(T_camera_lidar, dtype=np.float64))
+    R = so3_exp(math.radians(angle_deg) * axis) @ T_lidar_camera[:3, :3]
+    return invert_T(make_T(R, T_lidar_camera[:3, 3] + distance * direction))
