@@ -10,6 +10,7 @@ differ. Where numba's threading layer cannot run parallel kernels from two threa
 
 from __future__ import annotations
 
+import functools
 import os
 from collections.abc import Callable, Iterable
 from concurrent.futures import ThreadPoolExecutor
@@ -39,6 +40,7 @@ def thread_map(func: Callable[[T], R], items: Iterable[T], workers: int | None =
         return list(pool.map(func, items))
 
 
+@functools.cache  # the layer is fixed once numba is configured: asked once, not per call
 def _parallel_kernels_thread_safe() -> bool:
     """Whether numba's threading layer lets two threads run parallel kernels at once.
 

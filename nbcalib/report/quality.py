@@ -808,11 +808,15 @@ def _curves(costs, T: np.ndarray, config: AssessConfig, step) -> tuple[np.ndarra
     offsets = np.array([span * s for span in spans])
     values = np.empty_like(offsets)
     for axis in range(6):
-        for i, offset in enumerate(offsets[axis]):
+        poses = []
+        for offset in offsets[axis]:
             d = np.zeros(6)
             d[axis] = offset
-            Td = se3_exp(d) @ T
-            values[axis, i] = sum(thread_map(lambda c, Td=Td: c.value(Td), costs))
+            poses.append(se3_exp(d) @ T)
+        # each pair's whole curve on its own thread (one pool an axis), summed in pair order
+        per_pair = thread_map(lambda c, poses=poses: [c.value(Td) for Td in poses], costs)
+        for i in range(len(poses)):
+            values[axis, i] = sum(curve[i] for curve in per_pair)
         step(f"NID curve {AXIS_NAMES[axis]}")
     return offsets, values
 
