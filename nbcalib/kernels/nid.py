@@ -207,6 +207,108 @@ def _bspline(s):
     return w0, w1, w2, w3, d0, d1, d2, d3
 
 
+@jit
+def _smooth_chunk(
+    model_id,
+    params,
+    T,
+    xyz,
+    point_bins,
+    image_bins,
+    bins,
+    lo,
+    hi,
+    r0,
+    base,
+    span,
+    hist,
+    dhist,
+    want_grad,
+):
+    """One chunk of :func:`_joint_hist_smooth_impl`: points ``[lo, hi)`` into its private rows.
+
+    The chunk's rows are ``hist[base:base + span]`` (and ``dhist``'s), row ``base`` holding
+    histogram row ``r0``; they are zeroed here. Returns the chunk's count of points in the
+    image. A kernel of its own, not inlined: the serial and the parallel driver call the one
+    compiled body (compiling it into each cost 4 s and 9 s on a first run; 1.5 s now).
+    """
+    height, width = image_bins.shape
+    for a in range(base, base + span):
+        for b in range(bins):
+            hist[a, b] = 0.0
+            if want_grad:
+                for k in range(6):
+                    dhist[a, b, k] = 0.0
+    wu = np.empty(4)
+    wv = np.empty(4)
+    du = np.empty(4)
+    dv = np.empty(4)
+    cols = np.empty(4, dtype=np.int64)
+    patch = np.empty(16, dtype=np.int64)
+    m = np.empty((2, 6))
+    count = 0
+    for i in range(lo, hi):
+        x = xyz[0, i]
+        y = xyz[1, i]
+        z = xyz[2, i]
+        xc = T[0, 0] * x + T[0, 1] * y + T[0, 2] * z + T[0, 3]
+        yc = T[1, 0] * x + T[1, 1] * y + T[1, 2] * z + T[1, 3]
+        zc = T[2, 0] * x + T[2, 1] * y + T[2, 2] * z + T[2, 3]
+        if want_grad:
+            u, v, j00, j01, j02, j10, j11, j12, ok = project_point_jacobian(
+                model_id, params, xc, yc, zc
+            )
+        else:  # value only: the inlined projection, no Jacobian (same pixels, tested)
+            u, v, ok = project_point(model_id, params, xc, yc, zc)
+            j00 = j01 = j02 = j10 = j11 = j12 = 0.0
+        if not ok:
+            continue
+        if not (u >= -0.5 and u < width - 0.5 and v >= -0.5 and v < height - 0.5):
+            continue
+        count += 1
+        ku = math.floor(u)
+        kv = math.floor(v)
+        for ju in range(4):
+            cols[ju] = min(max(ku - 1 + ju, 0), width - 1)
+        for jv in range(4):
+            py = min(max(kv - 1 + jv, 0), height - 1)
+            for ju in range(4):
+                patch[4 * jv + ju] = image_bins[py, cols[ju]]
+        differ = 0
+        for j in range(1, 16):
+            differ |= patch[j] ^ patch[0]
+        a = point_bins[i] - r0 + base  # the point's row in its chunk's part
+        if differ == 0:  # one bin under the whole patch: weight 1, derivative 0
+            hist[a, patch[0]] += 1.0
+            continue
+        wu[0], wu[1], wu[2], wu[3], du[0], du[1], du[2], du[3] = _bspline(u - ku)
+        wv[0], wv[1], wv[2], wv[3], dv[0], dv[1], dv[2], dv[3] = _bspline(v - kv)
+        if want_grad:
+            # d(u, v)/d delta = J_proj @ [I, -[p_c]x]  (left perturbation, delta = [v, w])
+            m[0, 0] = j00
+            m[0, 1] = j01
+            m[0, 2] = j02
+            m[0, 3] = -j01 * zc + j02 * yc
+            m[0, 4] = j00 * zc - j02 * xc
+            m[0, 5] = -j00 * yc + j01 * xc
+            m[1, 0] = j10
+            m[1, 1] = j11
+            m[1, 2] = j12
+            m[1, 3] = -j11 * zc + j12 * yc
+            m[1, 4] = j10 * zc - j12 * xc
+            m[1, 5] = -j10 * yc + j11 * xc
+        for jv in range(4):
+            for ju in range(4):
+                b = patch[4 * jv + ju]
+                hist[a, b] += wu[ju] * wv[jv]
+                if want_grad:
+                    gu = du[ju] * wv[jv]
+                    gv = wu[ju] * dv[jv]
+                    for k in range(6):
+                        dhist[a, b, k] += gu * m[0, k] + gv * m[1, k]
+    return count
+
+
 def _joint_hist_smooth_impl(
     model_id, params, T, xyz, point_bins, image_bins, bins, rows, n_chunks, want_grad
 ):
@@ -216,21 +318,21 @@ def _joint_hist_smooth_impl(
     bins``), or ``group * bins + LiDAR bin`` for ``rows / bins`` stacked histograms of groups
     of points (:func:`grouped_rows`); ``bins`` is the number of image bins (the columns).
 
-    Per point, the image bins of the 4 x 4 patch are gathered first. When they are all equal
-    (30-55 % of the points on equalised real images, 1-4 % on noisy synthetic ones), the point
-    adds exactly its total weight, 1, to one cell and nothing to the derivative: the weights sum
-    to 1 at every position, so their derivatives sum to 0, and the B-spline weights, the
-    derivative terms and the 16 x 7 histogram updates are skipped (1.15-1.25 x faster on a real
-    image, the same speed on noisy ones). Otherwise each pixel adds its weight and derivative
-    terms to its cell. Tried and dropped: summing the terms over runs of equal bins, or over the
-    patch's bin range, before updating the cells; 10-25 % slower on the noisy benchmark image
-    and on synthetic renders, where branch mispredictions cost more than the saved updates.
-    The count of points in the image is kept per chunk in a local variable (one write per
-    chunk, no false sharing between threads). Each chunk's private histogram holds only its
-    window of rows (:func:`_row_windows`): with hundreds of groups, what its points touch.
+    Per point (:func:`_smooth_chunk`, one chunk of points at a time), the image bins of the
+    4 x 4 patch are gathered first. When they are all equal (30-55 % of the points on equalised
+    real images, 1-4 % on noisy synthetic ones), the point adds exactly its total weight, 1, to
+    one cell and nothing to the derivative: the weights sum to 1 at every position, so their
+    derivatives sum to 0, and the B-spline weights, the derivative terms and the 16 x 7
+    histogram updates are skipped (1.15-1.25 x faster on a real image, the same speed on noisy
+    ones). Otherwise each pixel adds its weight and derivative terms to its cell. Tried and
+    dropped: summing the terms over runs of equal bins, or over the patch's bin range, before
+    updating the cells; 10-25 % slower on the noisy benchmark image and on synthetic renders,
+    where branch mispredictions cost more than the saved updates. The count of points in the
+    image is kept per chunk (one write per chunk, no false sharing between threads). Each
+    chunk's private histogram holds only its window of rows (:func:`_row_windows`): with
+    hundreds of groups, what its points touch.
     """
     n = xyz.shape[1]
-    height, width = image_bins.shape
     first, span, offset = _row_windows(point_bins, n, bins, rows, n_chunks)
     total_rows = offset[n_chunks]
     # per-chunk histograms in flat buffers, zeroed by their own chunk: np.zeros here would be a
@@ -239,83 +341,24 @@ def _joint_hist_smooth_impl(
     dhist = np.empty((total_rows if want_grad else 1, bins, 6))
     counts = np.empty(n_chunks, dtype=np.int64)
     for c in prange(n_chunks):
-        r0 = first[c]
-        base = offset[c]
-        for a in range(base, base + span[c]):
-            for b in range(bins):
-                hist[a, b] = 0.0
-                if want_grad:
-                    for k in range(6):
-                        dhist[a, b, k] = 0.0
-        wu = np.empty(4)
-        wv = np.empty(4)
-        du = np.empty(4)
-        dv = np.empty(4)
-        cols = np.empty(4, dtype=np.int64)
-        patch = np.empty(16, dtype=np.int64)
-        m = np.empty((2, 6))
-        count = 0
         lo, hi = _chunk_bounds(n, n_chunks, c)
-        for i in range(lo, hi):
-            x = xyz[0, i]
-            y = xyz[1, i]
-            z = xyz[2, i]
-            xc = T[0, 0] * x + T[0, 1] * y + T[0, 2] * z + T[0, 3]
-            yc = T[1, 0] * x + T[1, 1] * y + T[1, 2] * z + T[1, 3]
-            zc = T[2, 0] * x + T[2, 1] * y + T[2, 2] * z + T[2, 3]
-            if want_grad:
-                u, v, j00, j01, j02, j10, j11, j12, ok = project_point_jacobian(
-                    model_id, params, xc, yc, zc
-                )
-            else:  # value only: the inlined projection, no Jacobian (same pixels, tested)
-                u, v, ok = project_point(model_id, params, xc, yc, zc)
-                j00 = j01 = j02 = j10 = j11 = j12 = 0.0
-            if not ok:
-                continue
-            if not (u >= -0.5 and u < width - 0.5 and v >= -0.5 and v < height - 0.5):
-                continue
-            count += 1
-            ku = math.floor(u)
-            kv = math.floor(v)
-            for ju in range(4):
-                cols[ju] = min(max(ku - 1 + ju, 0), width - 1)
-            for jv in range(4):
-                py = min(max(kv - 1 + jv, 0), height - 1)
-                for ju in range(4):
-                    patch[4 * jv + ju] = image_bins[py, cols[ju]]
-            differ = 0
-            for j in range(1, 16):
-                differ |= patch[j] ^ patch[0]
-            a = point_bins[i] - r0 + base  # the point's row in its chunk's part
-            if differ == 0:  # one bin under the whole patch: weight 1, derivative 0
-                hist[a, patch[0]] += 1.0
-                continue
-            wu[0], wu[1], wu[2], wu[3], du[0], du[1], du[2], du[3] = _bspline(u - ku)
-            wv[0], wv[1], wv[2], wv[3], dv[0], dv[1], dv[2], dv[3] = _bspline(v - kv)
-            if want_grad:
-                # d(u, v)/d delta = J_proj @ [I, -[p_c]x]  (left perturbation, delta = [v, w])
-                m[0, 0] = j00
-                m[0, 1] = j01
-                m[0, 2] = j02
-                m[0, 3] = -j01 * zc + j02 * yc
-                m[0, 4] = j00 * zc - j02 * xc
-                m[0, 5] = -j00 * yc + j01 * xc
-                m[1, 0] = j10
-                m[1, 1] = j11
-                m[1, 2] = j12
-                m[1, 3] = -j11 * zc + j12 * yc
-                m[1, 4] = j10 * zc - j12 * xc
-                m[1, 5] = -j10 * yc + j11 * xc
-            for jv in range(4):
-                for ju in range(4):
-                    b = patch[4 * jv + ju]
-                    hist[a, b] += wu[ju] * wv[jv]
-                    if want_grad:
-                        gu = du[ju] * wv[jv]
-                        gv = wu[ju] * dv[jv]
-                        for k in range(6):
-                            dhist[a, b, k] += gu * m[0, k] + gv * m[1, k]
-        counts[c] = count  # one write per chunk: no false sharing between threads
+        counts[c] = _smooth_chunk(
+            model_id,
+            params,
+            T,
+            xyz,
+            point_bins,
+            image_bins,
+            bins,
+            lo,
+            hi,
+            first[c],
+            offset[c],
+            span[c],
+            hist,
+            dhist,
+            want_grad,
+        )
     # the chunks' parts summed in chunk order (the same sums, in the same order, for every
     # number of threads)
     out = np.empty((rows, bins))
