@@ -24,7 +24,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["cache_is_warm", "compiling_note", "start", "tiny_job"]
+__all__ = ["cache_is_warm", "compiling_note", "running", "start", "tiny_job"]
 
 log = logging.getLogger("nbcalib.warmup")
 
@@ -71,13 +71,27 @@ def _cache_writable() -> bool:
     return os.access(folder, os.W_OK)
 
 
+#: The warm-up process this process started (None: none was).
+_process: subprocess.Popen | None = None
+
+
+def running() -> bool:
+    """True while the warm-up process this process started is still compiling.
+
+    Matching asks (:func:`nbcalib.matching.match.match_images`): ONNX Runtime then leaves the
+    warm-up a core instead of racing it for both (docs/BENCHMARKS.md 7).
+    """
+    return _process is not None and _process.poll() is None
+
+
 def start() -> subprocess.Popen | None:
     """Start :func:`tiny_job` in a low-priority background process, unless not needed.
 
     Returns the process (None when the cache is warm or cannot be written,
-    ``NBCALIB_NO_WARMUP`` is set, or it cannot be started). It is never waited for: the job
-    it helps does not depend on it.
+    ``NBCALIB_NO_WARMUP`` is set, or it cannot be started); :func:`running` says whether it
+    still runs. It is never waited for: the job it helps does not depend on it.
     """
+    global _process
     if os.environ.get("NBCALIB_NO_WARMUP") or cache_is_warm() or not _cache_writable():
         return None
 
@@ -85,7 +99,7 @@ def start() -> subprocess.Popen | None:
         os.nice(10)
 
     try:
-        return subprocess.Popen(
+        _process = subprocess.Popen(
             [sys.executable, "-m", "nbcalib.warmup"],
             stdin=subprocess.DEVNULL,
             stdout=subprocess.DEVNULL,
@@ -94,6 +108,7 @@ def start() -> subprocess.Popen | None:
             preexec_fn=lower_priority,
             env={**os.environ, "NBCALIB_NO_WARMUP": "1"},
         )
+        return _process
     except OSError as exc:  # no fork, no interpreter: the job just compiles as it goes
         log.debug("no warm-up process: %s", exc)
         return None

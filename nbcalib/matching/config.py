@@ -61,7 +61,8 @@ class MatchConfig:
     sift_ratio : float
         Lowe's ratio of the SIFT fallback.
     threads : int or None
-        onnxruntime intra-op threads (None: the number of cores).
+        onnxruntime intra-op threads (None: the number of cores, one fewer while a first run
+        compiles kernels in the background, :func:`nbcalib.warmup.running`).
     views : int
         Camera-shaped LiDAR views: the dense cloud is rendered through the real camera's model
         at the LiDAR's angular resolution, at ``views`` level headings around the LiDAR (or a

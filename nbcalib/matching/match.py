@@ -143,6 +143,22 @@ def _session(name: str, directory: str, threads: int | None) -> OnnxMatcher:
     return OnnxMatcher(name, directory, threads=threads)
 
 
+def _threads(threads: int | None) -> int:
+    """ONNX Runtime's intra-op threads: ``threads``, else the cores (fewer during a warm-up).
+
+    One core fewer while a first run's warm-up compiles (:func:`nbcalib.warmup.running`). Two
+    threads racing the warm-up for two cores waited on each other: a cold demo's matching took
+    30-32 s against 16.5 s warm; with one thread 21-23 s (19-20 s warm), and the warm-up
+    compiles on the other core (docs/BENCHMARKS.md 7).
+    """
+    if threads is not None:
+        return threads
+    from nbcalib import warmup
+
+    cores = os.cpu_count() or 1
+    return max(1, cores - 1) if warmup.running() else cores
+
+
 def pixels_per_radian(camera) -> float:
     """Angular resolution of a camera at its image centre, pixels per radian.
 
@@ -337,7 +353,7 @@ def match_images(
         kpts1, desc1 = sift_features(lid, max_keypoints=max_keypoints or 0)
         matches0, confidence = sift_match(desc0, desc1, ratio=cfg.sift_ratio)
     else:
-        session = _session(name, str(_model_dir(model_dir)), cfg.threads)
+        session = _session(name, str(_model_dir(model_dir)), _threads(cfg.threads))
         options = dict(
             detection_threshold=cfg.detection_threshold, max_keypoints=max_keypoints, resize=None
         )
