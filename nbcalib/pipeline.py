@@ -283,15 +283,16 @@ class Calibrator:
         pairs = self._pairs()
         # many pairs: match them in turn until a few agree on the pose (matching.guess_pairs)
         subset = cfg.matching.guess_pairs if 0 < cfg.matching.guess_pairs < len(pairs) else 0
-        agreed = None
+        agreed = skipped = None
         for k, pair in enumerate(pairs):
             if agreed is not None:
-                found = unmatched_pair(
-                    pair,
-                    self._matcher_name(),
-                    f"{len(agreed)} matched pairs already agree on the pose (matching.guess_pairs "
-                    f"{subset}; --guess-pairs 0 matches every pair)",
-                )
+                if skipped is None:  # the matched pairs' matcher and why the rest are not
+                    skipped = (
+                        self._matcher_name(),
+                        f"{len(agreed)} matched pairs already agree on the pose "
+                        f"(matching.guess_pairs {subset}; --guess-pairs 0 matches every pair)",
+                    )
+                found = unmatched_pair(pair, *skipped)
                 self.matches[pair.name] = found
                 if self.work is not None:
                     self.work.write_matches(found, pair, draw=False)
