@@ -531,3 +531,9 @@ def test_the_screen_also_sends_the_views_that_agree_to_the_matcher():
     assert _screened_choice(results, cfg) == {0, 1, 2, 3}
     assert _screened_choice(results, MatchConfig(screen_views=2, pool=False)) == {0, 1}
     assert _screened_choice([], cfg) == set()
+    # matched_views caps them, the screen's best supported first (2 before 3)
+    assert _screened_choice(results, MatchConfig(screen_views=2, matched_views=3)) == {0, 1, 2}
+    assert _screened_choice(results, MatchConfig(screen_views=2, matched_views=9)) == {0, 1, 2, 3}
+    assert _screened_choice(results, MatchConfig(screen_views=4, matched_views=1)) == {0}
+    with pytest.raises(ValueError, match="matched_views"):
+        MatchConfig(matched_views=-1)

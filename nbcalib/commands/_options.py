@@ -186,6 +186,9 @@ MATCHING = (
            "run the learned matcher on the N views a cheap screen (descriptors' mutual nearest "
            "neighbours) ranks first, and on the views agreeing with the first (0: on every "
            "view)", "N"),
+    Option("--matched-views", "matching.matched_views",
+           "at most N screened views go to the learned matcher, the screen's best (0: no "
+           "limit)", "N"),
     Option("--guess-pairs", "matching.guess_pairs",
            "with more pairs than N, match pairs in turn until N found agreeing poses; the "
            "rest are not matched (0: match every pair)", "N"),

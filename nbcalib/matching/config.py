@@ -76,6 +76,10 @@ class MatchConfig:
         every view whose screened rotation agrees with the first's as the pool asks (0: the
         matcher on every view; SIFT always matches every view). The best and pooled views
         are chosen among these (docs/BENCHMARKS.md, section 10).
+    matched_views : int
+        At most this many of the screened views go to the learned matcher, those with the most
+        RANSAC support of the screen (0: no limit). A wide camera's screened rotations agree
+        in most views, and all of those would go.
     prior_yaw_offsets_deg : tuple of float
         Yaw offsets of the views around a prior, degrees.
     pixels_per_degree : float or None
@@ -147,6 +151,7 @@ class MatchConfig:
     threads: int | None = None
     views: int = 12
     screen_views: int = 4
+    matched_views: int = 0
     prior_yaw_offsets_deg: tuple[float, ...] = (-20.0, 0.0, 20.0)
     pixels_per_degree: float | None = None
     min_fill: float = 0.05
@@ -200,7 +205,14 @@ class MatchConfig:
             value = getattr(self, name)
             if value is not None and value < 1:
                 raise ValueError(f"{name} must be >= 1, got {value}")
-        for name in ("fill_radius", "median", "views", "screen_views", "guess_pairs"):
+        for name in (
+            "fill_radius",
+            "median",
+            "views",
+            "screen_views",
+            "matched_views",
+            "guess_pairs",
+        ):
             if getattr(self, name) < 0:
                 raise ValueError(f"{name} must be >= 0, got {getattr(self, name)}")
         for name in ("search_radius", "splat_pixels_at_1m", "pool_angle_deg"):

@@ -188,6 +188,8 @@ def _screened_choice(results: list[ViewMatches], cfg: MatchConfig) -> set[int]:
     chosen = set(ranked[: cfg.screen_views])
     if ranked:
         chosen.update(_agreeing(results, ranked[0], cfg))
+    if cfg.matched_views > 0:  # the best supported of them only
+        chosen = set([k for k in ranked if k in chosen][: cfg.matched_views])
     return chosen
 
 
