@@ -230,7 +230,8 @@ def _smooth_chunk(
     The chunk's rows are ``hist[base:base + span]`` (and ``dhist``'s), row ``base`` holding
     histogram row ``r0``; they are zeroed here. Returns the chunk's count of points in the
     image. A kernel of its own, not inlined: the serial and the parallel driver call the one
-    compiled body (compiling it into each cost 4 s and 9 s on a first run; 1.5 s now).
+    compiled body (with the body compiled into it, the parallel driver took 8.7 s to compile
+    on a first run; 2.5 s calling it; docs/BENCHMARKS.md 7).
     """
     height, width = image_bins.shape
     for a in range(base, base + span):
