@@ -136,7 +136,7 @@ def test_bad_files_and_chains(tmp_path):
         read_kalibr_camchain(_write(tmp_path, "cam0: [unclosed\n"))
     with pytest.raises(InputError, match="no cam0"):
         read_kalibr_camchain(_write(tmp_path, "image_width: 640\n"))
-    with pytest.raises(InputError, match="expected cam0, cam1"):
+    with pytest.raises(InputError, match="expected a mapping"):
         read_kalibr_camchain(_write(tmp_path, "- 1\n- 2\n"))
     cam = "{camera_model: pinhole, intrinsics: [500, 500, 320, 240], resolution: [640, 480]}"
     with pytest.raises(InputError, match="without gaps"):
@@ -159,3 +159,56 @@ def test_bad_files_and_chains(tmp_path):
     cam1 = cam[:-1] + f", T_cn_cnm1: {rows}}}"
     with pytest.raises(InputError, match="last row"):
         read_kalibr_camchain(_write(tmp_path, f"cam0: {cam}\ncam1: {cam1}\n"))
+
+
+def test_nbcalib_rig_round_trip_and_either_format_recognised(tmp_path):
+    from nbcalib.io.rig import read_rig, save_rig
+
+    kalibr = read_rig(_write(tmp_path, CAMCHAIN))  # a camchain, recognised by its content
+    assert kalibr.names() == ["cam0", "cam1", "cam2"]
+    for name in ("rig.yaml", "rig.json"):
+        save_rig(tmp_path / name, kalibr)
+        again = read_rig(tmp_path / name)
+        assert again.names() == kalibr.names()
+        for a, b in zip(kalibr.cameras, again.cameras):
+            assert a.camera.to_dict() == b.camera.to_dict() and a.topic == b.topic
+            np.testing.assert_allclose(b.T_cam_cam0, a.T_cam_cam0, atol=1e-12)
+    # a rig frame other than the first camera's: the camera-to-camera transforms are the same
+    T_rig_cam0 = se3_exp([1.0, 2.0, 0.5, 0.3, -0.2, 0.1])
+    text = (tmp_path / "rig.yaml").read_text()
+    import yaml
+
+    from nbcalib.transforms import pose_to_xyz_quat
+
+    data = yaml.safe_load(text)
+    for entry, cam in zip(data["cameras"], kalibr.cameras):
+        T_rig_cam = T_rig_cam0 @ invert_T(cam.T_cam_cam0)
+        entry["T_rig_camera"] = [float(x) for x in pose_to_xyz_quat(T_rig_cam)]
+    moved = read_rig(_write(tmp_path, yaml.safe_dump(data), "moved.yaml"))
+    np.testing.assert_allclose(moved.T("cam2", "cam1"), T21, atol=1e-9)
+    np.testing.assert_allclose(moved.cameras[0].T_cam_cam0, np.eye(4), atol=1e-9)
+
+
+def test_bad_nbcalib_rigs(tmp_path):
+    from nbcalib.io.rig import read_rig
+
+    cam = (
+        "{name: front, camera_model: pinhole, intrinsics: [500, 500, 320, 240], width: 640, "
+        "height: 480, T_rig_camera: [0, 0, 0, 0, 0, 0, 1]}"
+    )
+    cases = [
+        ("cameras: []\n", "non-empty list"),
+        (f"cameras: [{cam}, {cam}]\n", "'front' used twice"),
+        ("cameras: [{name: a, camera_model: pinhole}]\n", r"cameras\[0\] has no intrinsics"),
+        (f"cameras: [{cam.replace('0, 0, 0, 1]', '0, 0, 0, 0]')}]\n", "zero quaternion"),
+        (f"cameras: [{cam.replace('0, 0, 1]', '1]')}]\n", "must have 7 numbers"),
+        (f"cameras: [{cam.replace('320, 240]', '320]')}]\n", r"cameras\[0\] \(front\): .*takes 4"),
+        ("width: 640\n", "not a rig file"),
+    ]
+    for k, (text, message) in enumerate(cases):
+        path = _write(tmp_path, text, f"bad{k}.yaml")
+        with pytest.raises(InputError, match=message) as info:
+            read_rig(path)
+        assert str(info.value).startswith(f"{path}: ") and "\n" not in str(info.value)
+    with pytest.raises(InputError, match="not found"):
+        read_rig(tmp_path / "none.yaml")

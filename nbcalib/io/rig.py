@@ -1,5 +1,26 @@
 """Camera rigs: several cameras with known camera-to-camera extrinsics (issue 32's ``--rig``).
 
+:func:`read_rig` reads either format below, recognised by its content; :func:`save_rig` writes
+nbcalib's own, which :func:`read_rig` reads back (the cameras exactly, the poses to
+rounding).
+
+**nbcalib's rig YAML** (or JSON for ``.json``)::
+
+    cameras:
+      - name: front
+        camera_model: plumb_bob          # any nbcalib camera model, its parameter layout
+        intrinsics: [fx, fy, cx, cy]
+        distortion_coeffs: [k1, k2, p1, p2, k3]
+        width: 1280
+        height: 960
+        T_rig_camera: [x, y, z, qx, qy, qz, qw]   # the camera's pose in the rig frame
+        topic: /front/image_raw          # optional
+      - ...
+
+``T_rig_camera`` maps points in the camera's frame into the rig's, stored like the reference
+toolbox's ``T_lidar_camera`` (metres, quaternion xyzw); the rig frame is any frame the poses
+share (the first camera's, a vehicle's).
+
 :func:`read_kalibr_camchain` reads a **Kalibr camchain YAML** (``kalibr_calibrate_cameras``'
 ``camchain-*.yaml``, also the ``camchain-imucam-*.yaml`` of ``kalibr_calibrate_imu_camera``)::
 
@@ -36,7 +57,7 @@ import numpy as np
 
 from nbcalib.errors import InputError
 
-__all__ = ["Rig", "RigCamera", "read_kalibr_camchain"]
+__all__ = ["Rig", "RigCamera", "read_kalibr_camchain", "read_rig", "save_rig"]
 
 #: How far a given rotation may be from orthonormal (Kalibr writes ~1e-9 digits).
 _ORTHONORMAL_TOL = 1e-5
@@ -51,7 +72,7 @@ class RigCamera:
     Attributes
     ----------
     name : str
-        Its name in the file (``cam0``, ``cam1``, ...).
+        Its name in the file (Kalibr's ``cam0``, ``cam1``, ...).
     camera : CameraModel
         Its model, intrinsics and image size.
     T_cam_cam0 : ndarray of shape (4, 4)
@@ -87,6 +108,116 @@ class Rig:
         return by_name[a].T_cam_cam0 @ invert_T(by_name[b].T_cam_cam0)
 
 
+def read_rig(path: str | os.PathLike) -> Rig:
+    """Read a rig file: nbcalib's rig YAML/JSON or a Kalibr camchain YAML (module docstring).
+
+    Raises
+    ------
+    InputError
+        Missing or unreadable file, neither format, or any problem of the format it is.
+    """
+    data = _read_mapping(Path(path))
+    if "cameras" in data:
+        return _nbcalib_rig(data, Path(path))
+    if any(_CAM_KEY.match(str(key)) for key in data):
+        return read_kalibr_camchain(path)
+    raise InputError(
+        "not a rig file: expected nbcalib's 'cameras' list or a Kalibr camchain's cam0, cam1, ...",
+        path,
+    )
+
+
+def save_rig(path: str | os.PathLike, rig: Rig) -> None:
+    """Write ``rig`` in nbcalib's rig format (YAML, or JSON for ``.json``), atomically.
+
+    The rig frame written is the first camera's: ``T_rig_camera`` is each camera's
+    ``T_cam0_cam``.
+    """
+    import json
+
+    import yaml
+
+    from nbcalib.io._files import write_text_atomic
+    from nbcalib.transforms import invert_T, pose_to_xyz_quat
+
+    cameras = []
+    for c in rig.cameras:
+        entry = {"name": c.name, **c.camera.to_dict()}
+        entry["T_rig_camera"] = [float(x) for x in pose_to_xyz_quat(invert_T(c.T_cam_cam0))]
+        if c.topic is not None:
+            entry["topic"] = c.topic
+        cameras.append(entry)
+    data = {"cameras": cameras}
+    path = Path(path)
+    if path.suffix.lower() == ".json":
+        text = json.dumps(data, indent=2) + "\n"
+    else:
+        text = (
+            "# nbcalib rig (nbcalib.io.rig): T_rig_camera maps camera points into the rig frame\n"
+        )
+        text += yaml.safe_dump(data, sort_keys=False, default_flow_style=None, width=100)
+    write_text_atomic(path, text)
+
+
+def _read_mapping(path: Path) -> dict:
+    """The file parsed (JSON or YAML) into a dict."""
+    from nbcalib.io.calib_json import read_json
+    from nbcalib.io.camera_file import _read_yaml
+
+    if not path.is_file():
+        what = "is a directory, expected" if path.is_dir() else "not found:"
+        raise InputError(f"{what} a rig file", path)
+    data = read_json(path) if path.suffix.lower() == ".json" else _read_yaml(path)
+    if not isinstance(data, dict):
+        raise InputError("not a rig file: expected a mapping of keys to values", path)
+    return data
+
+
+def _nbcalib_rig(data: dict, path: Path) -> Rig:
+    """The rig of nbcalib's format (module docstring)."""
+    from nbcalib.io.camera_file import _nbcalib_camera, _numbers
+    from nbcalib.transforms import invert_T, pose_from_xyz_quat
+
+    entries = data["cameras"]
+    if not isinstance(entries, list) or not entries:
+        raise InputError("'cameras' must be a non-empty list of cameras", path)
+    cameras, poses = [], []
+    for k, entry in enumerate(entries):
+        where = f"cameras[{k}]"
+        if not isinstance(entry, dict):
+            raise InputError(f"{where} must be a mapping of keys to values", path)
+        for key in ("name", "camera_model", "intrinsics", "T_rig_camera"):
+            if key not in entry:
+                raise InputError(f"{where} has no {key}", path)
+        name = str(entry["name"])
+        if name in (c[0] for c in cameras):
+            raise InputError(f"{where}: camera name {name!r} used twice", path)
+        try:
+            camera = _nbcalib_camera(entry, path, None, None)
+        except InputError as exc:
+            raise InputError(f"{where} ({name}): {_without_path(exc, path)}", path) from None
+        values = _numbers(entry["T_rig_camera"], f"{where}.T_rig_camera", path, 7)
+        if not np.linalg.norm(values[3:]) > 0.0:
+            raise InputError(f"{where}.T_rig_camera has a zero quaternion", path)
+        topic = entry.get("topic")
+        cameras.append((name, camera, None if topic is None else str(topic)))
+        poses.append(pose_from_xyz_quat(values))
+    T_rig_cam0 = poses[0]
+    return Rig(
+        tuple(
+            RigCamera(name, camera, invert_T(T) @ T_rig_cam0, topic)
+            for (name, camera, topic), T in zip(cameras, poses)
+        )
+    )
+
+
+def _without_path(exc: InputError, path: Path) -> str:
+    """The message of an error about ``path``, without its ``path: `` prefix."""
+    text = str(exc)
+    prefix = f"{path}: "
+    return text[len(prefix) :] if text.startswith(prefix) else text
+
+
 def read_kalibr_camchain(path: str | os.PathLike) -> Rig:
     """Read a Kalibr camchain YAML into a :class:`Rig` (module docstring).
 
@@ -96,15 +227,8 @@ def read_kalibr_camchain(path: str | os.PathLike) -> Rig:
         Missing or unreadable file, not a camchain, an unsupported camera or distortion model,
         wrong parameter counts, non-finite numbers, a transform that is not rigid.
     """
-    from nbcalib.io.camera_file import _read_yaml
-
     path = Path(path)
-    if not path.is_file():
-        what = "is a directory, expected" if path.is_dir() else "not found:"
-        raise InputError(f"{what} a Kalibr camchain YAML", path)
-    data = _read_yaml(path)
-    if not isinstance(data, dict):
-        raise InputError("not a Kalibr camchain: expected cam0, cam1, ... entries", path)
+    data = _read_mapping(path)
     keys = sorted(
         (int(m.group(1)), key) for key in data if (m := _CAM_KEY.match(str(key))) is not None
     )
