@@ -402,7 +402,7 @@ def guess_stats(case: Path) -> dict:
 
     work = WorkDir(case / "work")
     calib = work.read_calib()
-    cal = Calibrator(config_from_record(calib.nbcalib.get("config")), workdir=work)
+    cal = Calibrator(config_from_record(calib.record.config), workdir=work)
     corr, _, _ = cal._guess_correspondences()
     cfg, camera = cal.config.initial_guess, cal._camera()
     weights = corr.weights if cfg.confidence_weights else None

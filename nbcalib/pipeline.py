@@ -39,6 +39,7 @@ from nbcalib._threads import thread_map
 from nbcalib.config import CalibrationConfig, config_to_dict, write_config
 from nbcalib.errors import InputError
 from nbcalib.io.calib_json import AUTO_STAGE, FINAL_STAGE, MANUAL_STAGE
+from nbcalib.io.job_record import CalibrationRecord
 from nbcalib.products import CalibrationResult, Start, as_stored_values
 from nbcalib.resume import STAGES, plan_stages
 from nbcalib.workdir import WorkDir
@@ -201,7 +202,7 @@ class Calibrator:
         self._forget_after("initial-guess")
         calib = self._calib()
         if calib is not None:
-            calib.nbcalib.setdefault("initial_guess", {})["failed"] = reason
+            calib.record.guess().failed = reason
         self._remember("initial-guess", calib)
 
     def _run_stage(self, stage: str) -> None:
@@ -267,11 +268,11 @@ class Calibrator:
             intensity_channel=self.config.preprocess.intensity_channel,
         )
         set_virtual_camera(calib, self.virtual)
-        calib.nbcalib["preprocess"] = {
+        calib.record.preprocess = {
             "pairs": {p.name: p.summary for p in self.pairs},
             "lidar_fov_deg": self.virtual.fov_deg,
         }
-        calib.nbcalib["inputs"] = self._inputs_record
+        calib.record.inputs = self._inputs_record
         self._remember("preprocess", calib)
 
     def _match(self) -> None:
@@ -389,7 +390,7 @@ class Calibrator:
         calib = self._calib()
         if calib is not None:
             calib.set_T_camera_lidar(stage, self.start.T_camera_lidar)
-            calib.nbcalib.setdefault("initial_guess", {})[stage] = {
+            calib.record.guess().stages[stage] = {
                 "correspondences": len(corr),
                 "ransac_inliers": guess.ransac.n_inliers,
                 "inliers": guess.n_inliers,
@@ -449,31 +450,33 @@ class Calibrator:
             from nbcalib.transforms import invert_T, pose_error
 
             dt, dr = pose_error(invert_T(result.T_camera_lidar), invert_T(start.T_camera_lidar))
-            calib.nbcalib["calibration"] = {
-                "start": start.source,
-                "start_T_lidar_camera": start.values,
-                "optimizer": cfg.optimizer,
-                "cost": cfg.cost,
-                "bins": cfg.bins,
-                "pyramid_levels": cfg.pyramid_levels,
-                "pairs": [p.name for p in pairs],
-                "nid": result.nid,
-                "nid_start": result.history[0].nid_start,
-                "nid_history": [result.history[0].nid_start, *(h.nid for h in result.history)],
-                "outer_iterations": len(result.history),
-                "iterations": result.iterations,
-                "evaluations": result.evaluations,
-                "converged": result.converged,
-                "stopped": result.stopped,
-                "seconds": round(time.perf_counter() - t0, 3),
-                "change_from_start": {"translation_m": float(dt), "rotation_deg": float(dr)},
-                "trust_region": {
-                    "translation_m": cfg.trust_translation,
-                    "rotation_deg": cfg.trust_rotation_deg,
+            calib.record.calibration = CalibrationRecord(
+                start=start.source,
+                start_T_lidar_camera=start.values,
+                start_uncertainty=_uncertainty_record(start.uncertainty),
+                converged=result.converged,
+                figures={
+                    "optimizer": cfg.optimizer,
+                    "cost": cfg.cost,
+                    "bins": cfg.bins,
+                    "pyramid_levels": cfg.pyramid_levels,
+                    "pairs": [p.name for p in pairs],
+                    "nid": result.nid,
+                    "nid_start": result.history[0].nid_start,
+                    "nid_history": [result.history[0].nid_start, *(h.nid for h in result.history)],
+                    "outer_iterations": len(result.history),
+                    "iterations": result.iterations,
+                    "evaluations": result.evaluations,
+                    "stopped": result.stopped,
+                    "seconds": round(time.perf_counter() - t0, 3),
+                    "change_from_start": {"translation_m": float(dt), "rotation_deg": float(dr)},
+                    "trust_region": {
+                        "translation_m": cfg.trust_translation,
+                        "rotation_deg": cfg.trust_rotation_deg,
+                    },
+                    "at_trust_boundary": result.at_trust_boundary,
                 },
-                "at_trust_boundary": result.at_trust_boundary,
-                "start_uncertainty": _uncertainty_record(start.uncertainty),
-            }
+            )
         if result.at_trust_boundary:
             self._refine_failed(calib, start, result)
         if calib is not None:
@@ -503,12 +506,11 @@ class Calibrator:
         self.refinement = None
         if calib is not None:
             calib.results.pop(FINAL_STAGE, None)
-            for key in ("result_times", "result_values"):
-                (calib.nbcalib.get(key) or {}).pop(FINAL_STAGE, None)
-            record = calib.nbcalib["calibration"]
-            record["failed"] = message
-            record["attempted_T_lidar_camera"] = as_stored_values(result.T_camera_lidar)
-            (calib.nbcalib.get("made") or {}).pop("calibrate", None)
+            calib.record.unstamp(FINAL_STAGE)
+            record = calib.record.calibration
+            record.failed = message
+            record.attempted_T_lidar_camera = as_stored_values(result.T_camera_lidar)
+            calib.record.forget_made("calibrate")
             self._made.pop("calibrate", None)
             self.work.write_calib(calib)
         raise RegistrationFailed(message, result)
@@ -520,8 +522,8 @@ class Calibrator:
         pairs = self._registration_pairs()
         converged = None if self.refinement is None else self.refinement.converged
         if converged is None and self.work is not None:
-            info = self._calib().nbcalib.get("calibration", {})
-            converged = info.get("converged") if isinstance(info.get("converged"), bool) else None
+            info = self._calib().record.calibration
+            converged = None if info is None else info.converged
         self.quality = assess(
             pairs,
             T,
@@ -551,9 +553,9 @@ class Calibrator:
             progress=True,
         )
         calib = self._calib()
-        info = calib.nbcalib.get("calibration")
-        if start is not None and isinstance(info, dict):  # the uncertainty the report judged by
-            info["start_uncertainty"] = _uncertainty_record(start.uncertainty)
+        info = calib.record.calibration
+        if start is not None and info is not None:  # the uncertainty the report judged by
+            info.start_uncertainty = _uncertainty_record(start.uncertainty)
         self._remember("report", calib)
 
     def _report_start(self) -> Start | None:
@@ -720,13 +722,13 @@ class Calibrator:
             return self._fallback
         calib = self._calib()
         if calib is not None:
-            info = calib.nbcalib.get("calibration") or {}
-            stored = info.get("start_T_lidar_camera")
-            if calib.has_result(FINAL_STAGE) and isinstance(stored, list) and len(stored) == 7:
+            info = calib.record.calibration or CalibrationRecord()
+            stored = info.start_T_lidar_camera
+            if calib.has_result(FINAL_STAGE) and stored is not None and len(stored) == 7:
                 return Start.from_values(
                     stored,
-                    str(info.get("start", "start")),
-                    _uncertainty_from_record(info.get("start_uncertainty")),
+                    info.start if info.start is not None else "start",
+                    _uncertainty_from_record(info.start_uncertainty),
                 )
             stage = calib.latest_initial_stage()
             if stage is not None:
@@ -788,16 +790,15 @@ class Calibrator:
         self._made[stage] = recipe
         if calib is None:
             return
-        calib.nbcalib.setdefault("made", {})[stage] = recipe
-        calib.nbcalib["config"] = config_to_dict(self.config)
-        if self._inputs_record is not None or "inputs" not in calib.nbcalib:
-            calib.nbcalib["inputs"] = self._inputs_record or calib.nbcalib.get("inputs")
-        elapsed = time.perf_counter() - self._stage_t0
-        calib.nbcalib.setdefault("seconds", {})[stage] = round(elapsed, 3)
+        record = calib.record
+        record.set_made(stage, recipe, round(time.perf_counter() - self._stage_t0, 3))
+        record.config = config_to_dict(self.config)
+        if self._inputs_record is not None:
+            record.inputs = self._inputs_record
         if self.run_options is not None:
-            calib.nbcalib["run"] = _plain(self.run_options)
+            record.run = _plain(self.run_options)
         self.work.write_calib(calib)
-        write_config(self.work.config_path, self.config, {"inputs": calib.nbcalib["inputs"]})
+        write_config(self.work.config_path, self.config, {"inputs": record.inputs})
 
     def _forget_after(self, stage: str) -> None:
         """A stage ran: what later stages made from its old product no longer holds.
@@ -814,16 +815,16 @@ class Calibrator:
             return
         self.work.remove_derived()
         for name in later:
-            (calib.nbcalib.get("made") or {}).pop(name, None)
+            calib.record.forget_made(name)
         stale = {"find-matches": (AUTO_STAGE, FINAL_STAGE), "initial-guess": (FINAL_STAGE,)}
         for result in stale.get(stage, ()):
             calib.results.pop(result, None)
-            for key in ("result_times", "result_values"):
-                (calib.nbcalib.get(key) or {}).pop(result, None)
+            calib.record.unstamp(result)
         if stage in ("find-matches", "initial-guess"):
-            (calib.nbcalib.get("initial_guess") or {}).pop("failed", None)
-            calib.nbcalib.pop("calibration", None)
-        calib.nbcalib.pop("quality", None)
+            if calib.record.initial_guess is not None:
+                calib.record.initial_guess.failed = None
+            calib.record.calibration = None
+        calib.record.quality = None
         self.work.write_calib(calib)
 
 

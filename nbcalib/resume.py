@@ -62,11 +62,11 @@ def _added_at_default(name: str, recorded, wanted) -> bool:
 
 
 def _report_is_current(work, calib) -> bool:
-    quality = calib.nbcalib.get("quality")
+    quality = calib.record.quality
     return (
         (work.path / "report" / "index.html").is_file()
-        and isinstance(quality, dict)
-        and quality.get("assessed_T_lidar_camera") == calib.results.get(FINAL_STAGE)
+        and quality is not None
+        and quality.assessed_T_lidar_camera == calib.results.get(FINAL_STAGE)
     )
 
 
@@ -83,7 +83,7 @@ def _present(calibrator, calib, stage: str) -> bool:
         return all(work.has_matches(name) for name in calib.bag_names)
     if stage == "initial-guess":
         guess = MANUAL_STAGE if calibrator._manual is not None else AUTO_STAGE
-        failed = (calib.nbcalib.get("initial_guess") or {}).get("failed")
+        failed = calib.record.initial_guess and calib.record.initial_guess.failed
         return calib.has_result(guess) or bool(failed and calibrator._fallback is not None)
     if stage == "calibrate":
         return calib.has_result(FINAL_STAGE)
@@ -92,9 +92,7 @@ def _present(calibrator, calib, stage: str) -> bool:
 
 def _done(calibrator, calib, stage: str) -> tuple[bool, str]:
     """(keep the product, why) for one stage."""
-    managed = calibrator.work is None or (
-        calib is not None and isinstance(calib.nbcalib.get("made"), dict)
-    )
+    managed = calibrator.work is None or (calib is not None and calib.record.made is not None)
     if not managed and calib is not None:
         # made without nbcalib: keep what is there; a later product stands for its inputs
         # (a guess picked by hand needs no matches, a result implies its guess)
@@ -105,7 +103,7 @@ def _done(calibrator, calib, stage: str) -> tuple[bool, str]:
         return False, "not made yet"
     if not managed:
         return True, "done, made without nbcalib"
-    made = calibrator._made if calibrator.work is None else calib.nbcalib["made"]
+    made = calibrator._made if calibrator.work is None else calib.record.made
     recorded = made.get(stage)
     if recorded is None:
         return False, "made by an earlier stage's old settings"

@@ -124,7 +124,7 @@ def set_virtual_camera(calib: CalibFile, virtual: VirtualCamera) -> None:
     entry = {"camera": virtual.camera.to_dict(), "T_vcam_lidar": T.tolist()}
     if virtual.fov_deg is not None:
         entry["lidar_fov_deg"] = float(virtual.fov_deg)
-    calib.nbcalib[_VIRTUAL_CAMERA_KEY] = entry
+    calib.record.virtual_camera = entry
 
 
 def get_virtual_camera(calib: CalibFile) -> VirtualCamera | None:
@@ -137,7 +137,7 @@ def get_virtual_camera(calib: CalibFile) -> VirtualCamera | None:
     """
     from nbcalib.camera import CameraModel
 
-    entry = calib.nbcalib.get(_VIRTUAL_CAMERA_KEY)
+    entry = calib.record.virtual_camera
     if entry is None:
         if calib.path is None or not calib.bag_names:
             return None

@@ -371,7 +371,7 @@ def run_kitti_frame(k):
         "work": work,
         "evaluate": json.loads(line.strip().splitlines()[-1]),
         "T_result": calib.get_T_camera_lidar("T_lidar_camera"),
-        "quality": calib.nbcalib["quality"],
+        "quality": calib.record.quality.figures,
     }
 
 
@@ -588,7 +588,7 @@ if auto_status != 0:
     print("the guess failed its test; written anyway to measure it:")
     nbcalib_command("initial-guess", auto_work, "--force")
 auto_calib = read_calib_json(auto_work / "calib.json")
-auto_record = auto_calib.nbcalib["initial_guess"]["init_T_lidar_camera_auto"]
+auto_record = auto_calib.record.initial_guess.stages["init_T_lidar_camera_auto"]
 auto_success = bool(auto_record["success"])
 auto_error = pose_errors(auto_calib.get_T_camera_lidar("init_T_lidar_camera_auto"), T_ref)
 print(

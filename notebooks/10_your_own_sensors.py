@@ -203,8 +203,8 @@ fig.tight_layout()
 nbcalib_command("find-matches", WORK, *(["--no-retries"] if QUICK else []))
 auto_status, _ = nbcalib_command("initial-guess", WORK)
 # what initial-guess recorded (nothing when the guess failed: it writes no failed guess)
-auto_record = read_calib_json(WORK / "calib.json").nbcalib.get("initial_guess", {})
-auto_record = auto_record.get("init_T_lidar_camera_auto")
+guesses = read_calib_json(WORK / "calib.json").record.initial_guess  # None: none recorded
+auto_record = guesses.stages.get("init_T_lidar_camera_auto") if guesses else None
 print(
     "automatic guess:",
     "passed its test" if auto_status == 0 else f"failed its test (exit status {auto_status})",
@@ -345,7 +345,7 @@ nbcalib_command("calibrate", WORK, *(["--max-outer", "2"] if QUICK else []))
 report_status, _ = nbcalib_command("report", WORK, *(["--restarts", "1"] if QUICK else []))
 calib = read_calib_json(WORK / "calib.json")
 T_result = calib.get_T_camera_lidar("T_lidar_camera")
-quality = calib.nbcalib["quality"]
+quality = calib.record.quality.figures  # the report's figures, as calib.json keeps them
 print(sorted(p.name for p in (WORK / "report").iterdir()))
 
 # %% [markdown]

@@ -156,7 +156,7 @@ def test_calibrate_from_files_and_several_pairs_into_a_workdir(scene, tmp_path):
     np.testing.assert_allclose(
         calib.get_T_camera_lidar("T_lidar_camera"), result.T_camera_lidar, atol=1e-6
     )
-    assert calib.nbcalib["calibration"]["nid_history"] == result.nid_history
+    assert calib.to_dict()["nbcalib"]["calibration"]["nid_history"] == result.nid_history
 
 
 def test_calibrate_rejects_bad_input(scene, tmp_path):

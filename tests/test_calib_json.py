@@ -26,6 +26,7 @@ from nbcalib.io.calib_json import (
     read_calib_json,
     write_calib_json,
 )
+from nbcalib.io.job_record import CameraEntry
 
 DATA = Path(__file__).parent / "data"
 REFERENCE = DATA / "reference_calib.json"
@@ -72,7 +73,7 @@ def test_reference_file_loads():
     assert calib.bag_names == calib.meta["bag_names"]
     assert calib.meta["intensity_channel"] == "intensity"
     assert set(calib.results) == set(STAGES)
-    assert calib.extra == {} and calib.nbcalib == {}
+    assert calib.extra == {} and calib.record.to_dict() == {}
     for stage in STAGES:
         assert calib.has_result(stage)
         T_camera_lidar = calib.get_T_camera_lidar(stage)
@@ -186,11 +187,11 @@ def test_round_trip_preserves_unknown_keys_and_values(tmp_path, rng):
 
 def test_numpy_values_in_our_section_are_written(tmp_path):
     calib = read_calib_json(REFERENCE)
-    calib.nbcalib["residuals"] = np.arange(3.0)
-    calib.nbcalib["count"] = np.int64(5)
+    calib.record.other["residuals"] = np.arange(3.0)
+    calib.record.other["count"] = np.int64(5)
     write_calib_json(tmp_path / "calib.json", calib)
     back = read_calib_json(tmp_path / "calib.json")
-    assert back.nbcalib == {"residuals": [0.0, 1.0, 2.0], "count": 5}
+    assert back.record.to_dict() == {"residuals": [0.0, 1.0, 2.0], "count": 5}
 
 
 def test_quaternion_is_normalised(tmp_path):
@@ -223,7 +224,7 @@ def test_write_without_camera_is_a_programming_error(tmp_path):
     with pytest.raises(ValueError, match="camera"):
         write_calib_json(tmp_path / "calib.json", CalibFile())
     calib = read_calib_json(REFERENCE)
-    calib.nbcalib["bad"] = float("nan")
+    calib.record.other["bad"] = float("nan")
     with pytest.raises(ValueError):
         write_calib_json(tmp_path / "calib.json", calib)
     assert list(tmp_path.iterdir()) == []
@@ -234,7 +235,7 @@ def _calib_with(stages, times=None) -> CalibFile:
     calib = read_calib_json(REFERENCE)
     calib.results = {stage: calib.results[stage] for stage in stages}
     if times is not None:
-        calib.nbcalib["result_times"] = times
+        calib.record.result_times = times
     return calib
 
 
@@ -332,7 +333,7 @@ def test_camera_size_sources(tmp_path):
     assert (calib.camera_model().width, calib.camera_model().height) == (64, 48)
     with pytest.raises(InputError, match="64x48 images, not 640x480"):
         calib.camera_model(640, 480)
-    calib.nbcalib["camera"] = {"width": 2448, "height": 2048}  # recorded size wins over the image
+    calib.record.camera = CameraEntry(width=2448, height=2048)  # recorded size wins over the image
     assert calib.camera_model().width == 2448
 
 

@@ -61,7 +61,7 @@ def test_calibrate_recovers_the_truth_from_init(workdir, capsys):
     T = calib.get_T_camera_lidar("T_lidar_camera")
     dt, dr = pose_error(invert_T(T), np.eye(4))
     assert dt < 0.005 and dr < 0.05, (dt, dr)
-    fig = calib.nbcalib["calibration"]
+    fig = calib.to_dict()["nbcalib"]["calibration"]
     assert fig["nid"] < fig["nid_start"] and fig["start"] == "--init"
     json.dumps(fig)
     start = pose_from_xyz_quat(fig["start_T_lidar_camera"])
@@ -86,7 +86,7 @@ def test_a_run_held_by_the_trust_region_fails_and_writes_no_result(workdir, caps
     assert "the region is 2 cm / 0.5 deg" in err and "--init" in err
     calib = read_calib_json(workdir.calib_path)
     assert not calib.has_result("T_lidar_camera")  # the old result went too: nothing stale
-    fig = calib.nbcalib["calibration"]
+    fig = calib.to_dict()["nbcalib"]["calibration"]
     assert fig["trust_region"] == {"translation_m": 0.02, "rotation_deg": 0.5}
     assert fig["at_trust_boundary"] is True and fig["failed"] in err
     assert fig["start_uncertainty"] == {"translation_m": 0.005, "rotation_deg": 0.1}
@@ -120,7 +120,7 @@ def test_calibrate_starts_from_the_initial_guess_in_calib_json(workdir):
     workdir.write_calib(calib)
     assert main(["calibrate", str(workdir.path), "--max-outer", "3"]) == 0
     calib = read_calib_json(workdir.calib_path)
-    assert calib.nbcalib["calibration"]["start"] == "init_T_lidar_camera_auto"
+    assert calib.to_dict()["nbcalib"]["calibration"]["start"] == "init_T_lidar_camera_auto"
 
 
 @pytest.mark.parametrize(

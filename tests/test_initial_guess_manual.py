@@ -240,7 +240,7 @@ def test_manual_path_end_to_end(workdir, tmp_path, capsys):
         assert not calib.has_result(AUTO_STAGE)
         err = pose_errors(calib.get_T_camera_lidar(MANUAL_STAGE), T_TRUE)
         assert err["rotation_error_deg"] < 0.1 and err["translation_error_m"] < 0.01, err
-        quality = calib.nbcalib["initial_guess"][MANUAL_STAGE]
+        quality = calib.to_dict()["nbcalib"]["initial_guess"][MANUAL_STAGE]
         assert quality["inliers"] == 10 and quality["success"]
     finally:
         _restore(workdir)
@@ -276,9 +276,9 @@ def test_automatic_path_end_to_end(workdir, capsys):
         calib = read_calib_json(workdir.wd.calib_path)
         err = pose_errors(calib.get_T_camera_lidar(AUTO_STAGE), T_TRUE)
         assert err["rotation_error_deg"] < 0.3 and err["translation_error_m"] < 0.05, err
-        quality = calib.nbcalib["initial_guess"][AUTO_STAGE]
+        quality = calib.to_dict()["nbcalib"]["initial_guess"][AUTO_STAGE]
         assert quality["confidence_weights"]
-        assert calib.nbcalib["config"]["initial_guess"]["ransac_iterations"] == 4000
+        assert calib.to_dict()["nbcalib"]["config"]["initial_guess"]["ransac_iterations"] == 4000
         # too few matches: one-line error, exit status 2, nothing written
         _restore(workdir)
         few = Matches(kc[:2], kl[:2], np.arange(2), np.ones(2))

@@ -413,7 +413,7 @@ def test_a_job_recorded_before_the_recording_options_is_kept(plain_pair, tmp_pat
     assert main(["-q", "preprocess", str(cloud), str(image), str(work), *CAMERA]) == 0
     wd = WorkDir(work)
     calib = wd.read_calib()
-    recorded = calib.nbcalib["made"]["preprocess"]
+    recorded = calib.to_dict()["nbcalib"]["made"]["preprocess"]
     assert "frames" not in recorded["inputs"]
     for key in ("neighbors", "image_scan_fraction"):  # as an older version recorded it
         del recorded["preprocess"][key]

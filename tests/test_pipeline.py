@@ -60,9 +60,9 @@ def test_the_demo_the_command_line_and_the_api_agree_bit_for_bit(demo, tmp_path,
     assert api.xyz_quat == cli.results["T_lidar_camera"]
     np.testing.assert_array_equal(api.T_camera_lidar, cli.get_T_camera_lidar("T_lidar_camera"))
     # the same history and the same judgement
-    assert api.nid_history == cli.nbcalib["calibration"]["nid_history"]
-    assert api.quality.verdict == cli.nbcalib["quality"]["verdict"]
-    assert api.quality.uncertainty == cli.nbcalib["quality"]["uncertainty"]
+    assert api.nid_history == cli.to_dict()["nbcalib"]["calibration"]["nid_history"]
+    assert api.quality.verdict == cli.to_dict()["nbcalib"]["quality"]["verdict"]
+    assert api.quality.uncertainty == cli.to_dict()["nbcalib"]["quality"]["uncertainty"]
 
 
 def test_a_stage_run_by_hand_gives_the_pipelines_result(demo, tmp_path):
@@ -80,7 +80,7 @@ def test_a_stage_run_by_hand_gives_the_pipelines_result(demo, tmp_path):
     after = read_calib_json(work / "calib.json")
     assert after.results["T_lidar_camera"] == before.results["T_lidar_camera"]
     # the report described the old result: it is gone, not stale
-    assert not (work / "report").exists() and "quality" not in after.nbcalib
+    assert not (work / "report").exists() and "quality" not in after.to_dict().get("nbcalib", {})
 
 
 def test_the_api_finds_its_own_initial_guess():

@@ -508,7 +508,7 @@ def test_report_writes_html_figures_and_calib_json(workdir, capsys):
     assert "Verdict" in page and "Uncertainty" in page
     after = read_calib_json(workdir.calib_path)
     assert (after.camera, after.meta, after.results) == (before.camera, before.meta, before.results)
-    quality = after.nbcalib["quality"]
+    quality = after.to_dict()["nbcalib"]["quality"]
     assert quality["verdict"] == "ok" and quality["report"] == "report/index.html"
     assert quality["uncertainty"]["translation_total_cm"] > 0
     assert not list(workdir.path.glob(".report*"))  # no temporary folders left
@@ -555,7 +555,7 @@ def test_report_flags_a_garbage_result(workdir):
     assert "suspect" in report._repr_html_()
     page = report.html_path.read_text()
     assert "What to do next" in page and report.quality.next_steps
-    stored = read_calib_json(workdir.calib_path).nbcalib["quality"]
+    stored = read_calib_json(workdir.calib_path).to_dict()["nbcalib"]["quality"]
     assert stored["next_steps"] == report.quality.next_steps
 
 

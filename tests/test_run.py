@@ -75,13 +75,13 @@ def test_run_calibrates_and_records_the_options(finished):
     calib = read_calib_json(finished / "calib.json")
     dt, dr = pose_error(invert_T(calib.get_T_camera_lidar("T_lidar_camera")), invert_T(T_TRUE))
     assert dt < 0.005 and dr < 0.05, (dt, dr)
-    config = calib.nbcalib["config"]  # the whole config tree used
+    config = calib.to_dict()["nbcalib"]["config"]  # the whole config tree used
     assert config["matching"]["matcher"] == "sift"
     assert config["refine"]["max_outer"] == 2 and config["initial_guess"]["min_inliers"] == 1000
-    assert calib.nbcalib["inputs"]["inputs"][0].endswith("points.npy")
+    assert calib.to_dict()["nbcalib"]["inputs"]["inputs"][0].endswith("points.npy")
     # what made each product is recorded (the resume decisions use it)
     assert {"preprocess", "find-matches", "initial-guess", "calibrate"} <= set(
-        calib.nbcalib["made"]
+        calib.to_dict()["nbcalib"]["made"]
     )
     # the YAML copy holds the same tree, and --config reads it back
     written = read_config_file(finished / "nbcalib_config.yaml")
@@ -92,9 +92,9 @@ def test_run_calibrates_and_records_the_options(finished):
 def test_run_falls_back_to_init_and_says_so(finished):
     calib = read_calib_json(finished / "calib.json")
     assert not calib.has_result("init_T_lidar_camera_auto")
-    assert calib.nbcalib["calibration"]["start"] == "--init"
-    assert calib.nbcalib["run"]["init"] == INIT.split("=", 1)[1]
-    assert calib.nbcalib["initial_guess"]["failed"]
+    assert calib.to_dict()["nbcalib"]["calibration"]["start"] == "--init"
+    assert calib.to_dict()["nbcalib"]["run"]["init"] == INIT.split("=", 1)[1]
+    assert calib.to_dict()["nbcalib"]["initial_guess"]["failed"]
 
 
 def test_a_failed_automatic_guess_says_what_to_do_next(inputs, tmp_path, capsys):
@@ -139,26 +139,26 @@ def test_init_uncertainty_judges_the_move_and_restating_it_redoes_only_the_repor
 ):
     work = _copy(finished, tmp_path)
     calib = read_calib_json(work / "calib.json")
-    calib.nbcalib["run"]["no_report"] = False  # the report this time
+    calib.record.run["no_report"] = False  # the report this time
     (work / "calib.json").write_text(json.dumps(calib.to_dict()))
     caplog.set_level("INFO", logger="nbcalib")
     assert main(["run", str(work), "--init-uncertainty", "0.002", "0.05"]) == 0
     assert "calibrate: skipped (done)" in caplog.text
     calib = read_calib_json(work / "calib.json")
-    assert calib.nbcalib["run"]["init_uncertainty"] == ["0.002", "0.05"]
-    assert calib.nbcalib["calibration"]["start_uncertainty"] == {
+    assert calib.to_dict()["nbcalib"]["run"]["init_uncertainty"] == ["0.002", "0.05"]
+    assert calib.to_dict()["nbcalib"]["calibration"]["start_uncertainty"] == {
         "translation_m": 0.002,
         "rotation_deg": 0.05,
     }
-    move = calib.nbcalib["quality"]["move_from_start"]
+    move = calib.to_dict()["nbcalib"]["quality"]["move_from_start"]
     assert move["start_uncertainty"]["source"] == "stated"
     # ~5 cm and ~1 deg from a start stated to within 2 mm / 0.05 deg: too far
-    assert any(r.startswith("moved ") for r in calib.nbcalib["quality"]["reasons"])
+    assert any(r.startswith("moved ") for r in calib.to_dict()["nbcalib"]["quality"]["reasons"])
     caplog.clear()
     assert main(["run", str(work), "--init-uncertainty", "0.1", "2"]) == 0
     assert "calibrate: skipped (done)" in caplog.text
     assert "settings changed: start_uncertainty" in caplog.text
-    quality = read_calib_json(work / "calib.json").nbcalib["quality"]
+    quality = read_calib_json(work / "calib.json").to_dict()["nbcalib"]["quality"]
     assert not any(r.startswith("moved ") for r in quality["reasons"])
     assert quality["move_from_start"]["start_uncertainty"]["translation_m"] == 0.1
 
@@ -167,7 +167,7 @@ def test_run_continues_an_interrupted_job(finished, tmp_path, caplog):
     work = _copy(finished, tmp_path)
     calib = read_calib_json(work / "calib.json")
     del calib.results["T_lidar_camera"]
-    del calib.nbcalib["made"]["calibrate"]
+    del calib.record.made["calibrate"]
     (work / "calib.json").write_text(json.dumps(calib.to_dict()))
     caplog.set_level("INFO", logger="nbcalib")
     assert main(["run", str(work), "--max-outer", "1"]) == 0
@@ -187,10 +187,10 @@ def test_run_refuses_to_overwrite_a_finished_result(finished, inputs, tmp_path, 
     # --from calibrate: only calibrate runs again, with the new option
     assert main(["run", str(work), "--from", "calibrate", "--bins", "8", "--max-outer", "1"]) == 0
     calib = read_calib_json(work / "calib.json")
-    assert calib.nbcalib["config"]["refine"]["bins"] == 8
+    assert calib.to_dict()["nbcalib"]["config"]["refine"]["bins"] == 8
     assert (
-        calib.nbcalib["made"]["preprocess"]
-        == read_calib_json(finished / "calib.json").nbcalib["made"]["preprocess"]
+        calib.to_dict()["nbcalib"]["made"]["preprocess"]
+        == read_calib_json(finished / "calib.json").to_dict()["nbcalib"]["made"]["preprocess"]
     )
 
 
@@ -210,11 +210,11 @@ def test_run_reads_a_config_file(inputs, tmp_path):
         == 0
     )
     calib = read_calib_json(work / "calib.json")
-    used = calib.nbcalib["config"]
+    used = calib.to_dict()["nbcalib"]["config"]
     assert used["preprocess"]["voxel_size"] == 0.005 and used["preprocess"]["min_distance"] == 0.5
     assert used["matching"]["matcher"] == "sift" and not used["matching"]["draw"]
     assert not (work / "000000_matches.png").exists()
-    assert "calibrate" not in calib.nbcalib["made"]
+    assert "calibrate" not in calib.to_dict().get("nbcalib", {})["made"]
 
 
 @pytest.mark.parametrize(
@@ -270,7 +270,7 @@ def test_run_points_form_and_quiet(inputs, tmp_path, capsys):
     assert main([*argv, "--until", "preprocess", "-q"]) == 0
     captured = capsys.readouterr()
     assert captured.out == "" and captured.err == ""
-    assert read_calib_json(work / "calib.json").nbcalib["inputs"]["points"]
+    assert read_calib_json(work / "calib.json").to_dict()["nbcalib"]["inputs"]["points"]
 
 
 def test_run_user_errors(inputs, tmp_path, capsys):

@@ -240,10 +240,10 @@ def stage_calibrator(args: argparse.Namespace, own: tuple[str, ...]):
     calib = work.require_preprocessed()
     defaults = CalibrationConfig()
     base = replace(
-        config_from_record(calib.nbcalib.get("config")),
+        config_from_record(calib.record.config),
         **{name: getattr(defaults, name) for name in own},
     )
     model_dir = getattr(args, "model_dir", None)
     check_model_dir(model_dir)
-    model_dir = model_dir or (calib.nbcalib.get("run") or {}).get("model_dir")
+    model_dir = model_dir or (calib.record.run or {}).get("model_dir")
     return Calibrator(build_config(args, base=base), workdir=work, model_dir=model_dir)

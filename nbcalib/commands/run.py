@@ -192,17 +192,17 @@ def run(args: argparse.Namespace) -> int:
     calib = work.read_calib() if work.is_complete() else None
     given_inputs = inputs or points or images or getattr(args, "frames", None) is not None
     resuming = calib is not None and not given_inputs
-    recorded_run = dict(calib.nbcalib.get("run") or {}) if resuming else {}
+    recorded_run = dict(calib.record.run or {}) if resuming else {}
     options = {k: v for k, v in file_other.items() if k != "inputs"}
     options.update({k: v for k, v in vars(args).items() if k in _run_dests()})
     for key in REMEMBERED:
         if key not in options and key in recorded_run:
             options[key] = recorded_run[key]
-    recorded_inputs = calib.nbcalib.get("inputs") if resuming else None
+    recorded_inputs = calib.record.inputs if resuming else None
     if isinstance(file_other.get("inputs"), dict):
         recorded_inputs = file_other["inputs"]
     spec = input_spec(args, inputs, points, images=images, recorded=recorded_inputs)
-    base = config_from_record(calib.nbcalib.get("config")) if resuming else CalibrationConfig()
+    base = config_from_record(calib.record.config) if resuming else CalibrationConfig()
     config = build_config(args, base=base, file_values=file_values, file_path=file_path)
 
     init = parse_start(options.get("init"), options.get("init_uncertainty"))
@@ -260,14 +260,15 @@ def _summary(calibrator) -> None:
 def _start_origin(calib) -> str:
     """Where fine registration's start came from, in words, from ``calib.json``."""
     from nbcalib.io.calib_json import AUTO_STAGE, MANUAL_STAGE
+    from nbcalib.io.job_record import InitialGuessRecord
 
-    start = str((calib.nbcalib.get("calibration") or {}).get("start", "unknown"))
-    guess = calib.nbcalib.get("initial_guess") or {}
+    record = calib.record.calibration
+    start = record.start if record is not None and record.start is not None else "unknown"
+    guess = calib.record.initial_guess or InitialGuessRecord()
     if start == AUTO_STAGE:
-        matcher = (guess.get(AUTO_STAGE) or {}).get("matcher") or "keypoint"
-        return f"the automatic initial guess ({matcher} matches)"
+        return f"the automatic initial guess ({guess.matcher(AUTO_STAGE) or 'keypoint'} matches)"
     if start == MANUAL_STAGE:
         return "the initial guess from hand-picked correspondences"
-    if guess.get("failed"):
-        return f"{start} (the automatic initial guess failed: {guess['failed']})"
+    if guess.failed:
+        return f"{start} (the automatic initial guess failed: {guess.failed})"
     return start

@@ -34,6 +34,9 @@ nbcalib's section ``nbcalib`` holds:
   the result still holds those values: a result the reference rewrote has no known time.
 - anything else later stages add (quality figures, uncertainty, the config used), preserved.
 
+The section is typed: :class:`~nbcalib.io.job_record.JobRecord` (:attr:`CalibFile.record`),
+whose module is the only place its keys are spelled.
+
 Files are written like nlohmann's ``dump(2)``: keys sorted, indent 2, UTF-8, a final newline, and
 atomically (a temporary file in the same directory, then ``os.replace``), so a crash never leaves
 a half-written ``calib.json``. Unknown keys anywhere are kept on a round trip.
@@ -53,6 +56,7 @@ import numpy as np
 
 from nbcalib.errors import InputError
 from nbcalib.io._files import write_text_atomic
+from nbcalib.io.job_record import CameraEntry, JobRecord
 from nbcalib.transforms import invert_T, pose_from_xyz_quat, pose_to_xyz_quat
 
 if TYPE_CHECKING:
@@ -113,8 +117,8 @@ class CalibFile:
     results : dict
         Poses as stored: ``{stage: [x, y, z, qx, qy, qz, qw]}`` of ``T_lidar_camera``; use
         :meth:`get_T_camera_lidar` / :meth:`set_T_camera_lidar`.
-    nbcalib : dict
-        nbcalib's additions (module docstring).
+    record : JobRecord
+        nbcalib's additions, the ``nbcalib`` section (:mod:`nbcalib.io.job_record`).
     extra : dict
         Every other top-level key, preserved on a round trip.
     path : Path or None
@@ -124,7 +128,7 @@ class CalibFile:
     camera: dict = field(default_factory=dict)
     meta: dict = field(default_factory=dict)
     results: dict = field(default_factory=dict)
-    nbcalib: dict = field(default_factory=dict)
+    record: JobRecord = field(default_factory=JobRecord)
     extra: dict = field(default_factory=dict)
     path: Path | None = None
 
@@ -156,7 +160,7 @@ class CalibFile:
             camera=camera,
             meta=sections["meta"],
             results=sections["results"],
-            nbcalib=sections[NBCALIB_KEY],
+            record=JobRecord.from_dict(sections[NBCALIB_KEY]),
             extra=extra,
             path=None if path is None else Path(path),
         )
@@ -168,21 +172,16 @@ class CalibFile:
         data["meta"] = self.meta
         if self.results:
             data["results"] = self.results
-        if self.nbcalib:
-            data[NBCALIB_KEY] = self.nbcalib
+        section = self.record.to_dict()
+        if section:
+            data[NBCALIB_KEY] = section
         return data
 
     # ------------------------------------------------------------------ camera
     @property
     def image_size(self) -> tuple[int, int] | None:
         """Image ``(width, height)`` recorded under ``nbcalib.camera``, or None."""
-        info = self.nbcalib.get("camera")
-        if not isinstance(info, dict):
-            return None
-        width, height = info.get("width"), info.get("height")
-        if _is_int(width) and _is_int(height) and width > 0 and height > 0:
-            return int(width), int(height)
-        return None
+        return None if self.record.camera is None else self.record.camera.size
 
     def camera_model(self, width: int | None = None, height: int | None = None) -> CameraModel:
         """Build the :class:`~nbcalib.camera.CameraModel` of the ``camera`` entry.
@@ -207,8 +206,7 @@ class CalibFile:
         model = self.camera["camera_model"]
         intrinsics = [float(x) for x in self.camera["intrinsics"]]
         distortion = [float(x) for x in self.camera["distortion_coeffs"]]
-        info = self.nbcalib.get("camera")
-        recorded_model = info.get("camera_model") if isinstance(info, dict) else None
+        recorded_model = None if self.record.camera is None else self.record.camera.model
         if recorded_model == "pinhole" and model == "plumb_bob" and not any(distortion):
             model, distortion = "pinhole", []
         distortion = self._fit_distortion(model, distortion)
@@ -232,11 +230,7 @@ class CalibFile:
             "intrinsics": [float(x) for x in np.asarray(camera.intrinsics).ravel()],
             "distortion_coeffs": distortion,
         }
-        self.nbcalib["camera"] = {
-            "camera_model": model,
-            "width": int(camera.width),
-            "height": int(camera.height),
-        }
+        self.record.camera = CameraEntry(model, int(camera.width), int(camera.height))
 
     def _fit_distortion(self, model: str, distortion: list[float]) -> list[float]:
         count = _DISTORTION_COUNTS.get(model.strip().lower())
@@ -337,17 +331,16 @@ class CalibFile:
         recorded = [time for time in map(self.result_time, STAGES) if time is not None]
         if recorded and now <= max(recorded):
             now = max(recorded) + timedelta(microseconds=1)
-        self.nbcalib.setdefault("result_times", {})[stage] = now.isoformat(timespec="microseconds")
-        self.nbcalib.setdefault("result_values", {})[stage] = list(self.results[stage])
+        self.record.stamp(stage, now.isoformat(timespec="microseconds"), list(self.results[stage]))
 
     def result_time(self, stage: str) -> datetime | None:
         """Return when nbcalib wrote ``results[stage]``; None if the reference wrote it."""
         _check_stage(stage)
-        times = self.nbcalib.get("result_times")
-        text = times.get(stage) if isinstance(times, dict) else None
+        times = self.record.result_times
+        text = times.get(stage) if times is not None else None
         if not isinstance(text, str) or stage not in self.results:
             return None
-        written = self.nbcalib.get("result_values")
+        written = self.record.result_values
         current = self.results[stage]
         if isinstance(written, dict) and written.get(stage, current) != current:
             return None  # rewritten since (by the reference or by hand): time unknown
@@ -618,10 +611,6 @@ def _kind(value) -> str:
 
 def _is_number(value) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
-
-
-def _is_int(value) -> bool:
-    return isinstance(value, int) and not isinstance(value, bool)
 
 
 def _check_numbers(values, what: str, path) -> None:

@@ -31,6 +31,7 @@ import numpy as np
 from nbcalib.errors import InputError, MissingExtraError, require
 from nbcalib.io._files import write_bytes_atomic, write_text_atomic
 from nbcalib.io.calib_json import FINAL_STAGE
+from nbcalib.io.job_record import QualityRecord
 from nbcalib.progress import Progress
 from nbcalib.report.config import AssessConfig
 from nbcalib.report.quality import AXIS_NAMES, Quality, format_bound
@@ -112,7 +113,7 @@ def make_report(workdir: str | os.PathLike, *, assess_config: AssessConfig | Non
     work = WorkDir(workdir)
     if work.path.is_dir() and not work.calib_path.is_file():
         raise InputError("no calib.json here: run nbcalib preprocess first", work.path)
-    config = config_from_record(work.require_preprocessed().nbcalib.get("config"))
+    config = config_from_record(work.require_preprocessed().record.config)
     config = replace(config, assess=assess_config or AssessConfig())
     calibrator = Calibrator(config, workdir=work)
     calibrator.run(only="report")
@@ -189,11 +190,11 @@ def write_report(
             raise
 
         calib = work.read_calib()  # re-read: keep whatever changed meanwhile
-        entry = quality.to_dict()
-        entry["report"] = f"{REPORT_DIR}/index.html"
-        entry["written"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
-        entry["assessed_T_lidar_camera"] = list(calib.results.get(FINAL_STAGE, []))
-        calib.nbcalib["quality"] = entry
+        stored = quality.to_dict()
+        stored["report"] = f"{REPORT_DIR}/index.html"
+        stored["written"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
+        assessed = list(calib.results.get(FINAL_STAGE, []))
+        calib.record.quality = QualityRecord(assessed, stored)
         from nbcalib.io.calib_json import write_calib_json
 
         write_calib_json(work.calib_path, calib)

@@ -1,0 +1,334 @@
+"""The job's record: nbcalib's own section of ``calib.json``, typed; its keys are spelled here only.
+
+The reference toolbox ignores ``calib.json``'s ``nbcalib`` section; nbcalib keeps in it what a
+job did and how, so that a later command can resume, judge or report it. :class:`JobRecord` is
+that section, one attribute per entry; the entries read field by field have record types of
+their own (:class:`CameraEntry`, :class:`InitialGuessRecord`, :class:`CalibrationRecord`,
+:class:`QualityRecord`), and the entries another module writes and reads whole (the config
+tree, the inputs, the run's options, the preprocessing summary, what made each stage) stay
+mappings in that module's own format.
+
+``nbcalib`` section of ``calib.json``:
+
+========================== ================================================================
+key                        attribute
+========================== ================================================================
+``camera``                 :attr:`JobRecord.camera` (model name and image size)
+``result_times``           :attr:`JobRecord.result_times` (``{stage: ISO 8601 time}``)
+``result_values``          :attr:`JobRecord.result_values` (``{stage: [7 numbers]}``)
+``virtual_camera``         :attr:`JobRecord.virtual_camera` (:mod:`nbcalib.workdir`'s)
+``preprocess``             :attr:`JobRecord.preprocess` (pairs' summaries, LiDAR field of view)
+``inputs``                 :attr:`JobRecord.inputs` (the job's inputs, as given)
+``config``                 :attr:`JobRecord.config` (:func:`nbcalib.config.config_to_dict`)
+``run``                    :attr:`JobRecord.run` (``nbcalib run``'s remembered options)
+``made``                   :attr:`JobRecord.made` (``{stage: recipe}``; absent: not nbcalib's)
+``seconds``                :attr:`JobRecord.seconds` (``{stage: seconds}``)
+``initial_guess``          :attr:`JobRecord.initial_guess`
+``calibration``            :attr:`JobRecord.calibration`
+``quality``                :attr:`JobRecord.quality`
+========================== ================================================================
+
+Every key this module does not know, and every value of the wrong kind (a hand-edited file),
+is kept as read and written back unchanged (``other``), so that a round trip loses nothing; an
+entry of the wrong kind reads as absent.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field, fields
+from typing import Any
+
+__all__ = [
+    "CalibrationRecord",
+    "CameraEntry",
+    "InitialGuessRecord",
+    "JobRecord",
+    "QualityRecord",
+]
+
+
+def _is_dict(value) -> bool:
+    return isinstance(value, dict)
+
+
+def _is_str(value) -> bool:
+    return isinstance(value, str)
+
+
+def _is_list(value) -> bool:
+    return isinstance(value, list)
+
+
+def _is_bool(value) -> bool:
+    return isinstance(value, bool)
+
+
+def _is_size(value) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value > 0
+
+
+def _split(data: dict, checks: dict[str, Callable[[Any], bool]]) -> tuple[dict, dict]:
+    """(the declared keys whose values pass their check, every other key as read)."""
+    known, other = {}, {}
+    for key, value in data.items():
+        (known if key in checks and checks[key](value) else other)[key] = value
+    return known, other
+
+
+def _join(other: dict, known: dict) -> dict:
+    """``other`` with the known entries that are set (not None) over it."""
+    out = dict(other)
+    out.update({key: value for key, value in known.items() if value is not None})
+    return out
+
+
+@dataclass
+class CameraEntry:
+    """``nbcalib.camera``: the camera's nbcalib model name and image size.
+
+    The reference stores neither: ``pinhole`` is written there as ``plumb_bob`` with zero
+    distortion (:meth:`nbcalib.io.calib_json.CalibFile.set_camera`).
+    """
+
+    model: str | None = None
+    width: int | None = None
+    height: int | None = None
+    other: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> CameraEntry:
+        """The entry of a parsed ``nbcalib.camera``."""
+        known, other = _split(
+            data, {"camera_model": _is_str, "width": _is_size, "height": _is_size}
+        )
+        return cls(known.get("camera_model"), known.get("width"), known.get("height"), other)
+
+    def to_dict(self) -> dict:
+        """The ``nbcalib.camera`` to write."""
+        return _join(
+            self.other, {"camera_model": self.model, "width": self.width, "height": self.height}
+        )
+
+    @property
+    def size(self) -> tuple[int, int] | None:
+        """``(width, height)``, or None when not both are recorded."""
+        if self.width is None or self.height is None:
+            return None
+        return self.width, self.height
+
+
+@dataclass
+class InitialGuessRecord:
+    """``nbcalib.initial_guess``: each written guess's figures, and why the last one failed.
+
+    Attributes
+    ----------
+    stages : dict
+        ``{result key: figures}`` (correspondences, inliers, RMS, bounds, success, matcher, ...)
+        of each guess written, as :class:`nbcalib.pipeline.Calibrator` records them.
+    failed : str or None
+        Why the automatic guess was not written (a fallback start then stands in).
+    """
+
+    stages: dict[str, dict] = field(default_factory=dict)
+    failed: str | None = None
+    other: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> InitialGuessRecord:
+        """The record of a parsed ``nbcalib.initial_guess``."""
+        from nbcalib.io.calib_json import INITIAL_STAGES
+
+        checks = {"failed": _is_str, **{stage: _is_dict for stage in INITIAL_STAGES}}
+        known, other = _split(data, checks)
+        failed = known.pop("failed", None)
+        return cls(known, failed, other)
+
+    def to_dict(self) -> dict:
+        """The ``nbcalib.initial_guess`` to write."""
+        return _join(self.other, {**self.stages, "failed": self.failed})
+
+    def matcher(self, stage: str) -> str | None:
+        """The matcher whose matches made the guess ``stage`` (None: not recorded)."""
+        name = (self.stages.get(stage) or {}).get("matcher")
+        return name if isinstance(name, str) else None
+
+
+#: The fields of :class:`CalibrationRecord` and what their values must be.
+_CALIBRATION_CHECKS = {
+    "start": _is_str,
+    "start_T_lidar_camera": _is_list,
+    "start_uncertainty": _is_dict,
+    "converged": _is_bool,
+    "failed": _is_str,
+    "attempted_T_lidar_camera": _is_list,
+}
+
+
+@dataclass
+class CalibrationRecord:
+    """``nbcalib.calibration``: fine registration's start, its end, and its figures.
+
+    Attributes
+    ----------
+    start : str or None
+        Where the start came from (a result key, ``--init``, ``warm-up``, ...).
+    start_T_lidar_camera : list of 7 floats or None
+        The start, stored like a result (``[x, y, z, qx, qy, qz, qw]`` of ``T_lidar_camera``).
+    start_uncertainty : dict or None
+        The start's stated uncertainty (``translation_m``, ``rotation_deg``), if stated.
+    converged : bool or None
+        Whether the optimiser converged.
+    failed : str or None
+        Why there is no result (its optimum beyond the trust region), with
+    attempted_T_lidar_camera : list of 7 floats or None
+        the pose it stopped at.
+    figures : dict
+        Everything else it records (optimizer, cost, NID history, iterations, seconds, ...).
+    """
+
+    start: str | None = None
+    start_T_lidar_camera: list | None = None
+    start_uncertainty: dict | None = None
+    converged: bool | None = None
+    failed: str | None = None
+    attempted_T_lidar_camera: list | None = None
+    figures: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> CalibrationRecord:
+        """The record of a parsed ``nbcalib.calibration``."""
+        known, figures = _split(data, _CALIBRATION_CHECKS)
+        return cls(**known, figures=figures)
+
+    def to_dict(self) -> dict:
+        """The ``nbcalib.calibration`` to write."""
+        return _join(self.figures, {key: getattr(self, key) for key in _CALIBRATION_CHECKS})
+
+
+@dataclass
+class QualityRecord:
+    """``nbcalib.quality``: the report's figures and which result they judged.
+
+    Attributes
+    ----------
+    assessed_T_lidar_camera : list of 7 floats or None
+        The result the report judged, stored like a result: the report is current while
+        ``results.T_lidar_camera`` still holds it.
+    figures : dict
+        :meth:`nbcalib.report.quality.Quality.to_dict`, with the page and when it was written.
+    """
+
+    assessed_T_lidar_camera: list | None = None
+    figures: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> QualityRecord:
+        """The record of a parsed ``nbcalib.quality``."""
+        known, figures = _split(data, {"assessed_T_lidar_camera": _is_list})
+        return cls(known.get("assessed_T_lidar_camera"), figures)
+
+    def to_dict(self) -> dict:
+        """The ``nbcalib.quality`` to write."""
+        return _join(self.figures, {"assessed_T_lidar_camera": self.assessed_T_lidar_camera})
+
+
+#: Entries kept as mappings (each in its own module's format), by key = attribute name.
+_MAPPINGS = (
+    "result_times",
+    "result_values",
+    "virtual_camera",
+    "preprocess",
+    "inputs",
+    "config",
+    "run",
+    "made",
+    "seconds",
+)
+#: Entries with record types of their own: key -> type.
+_RECORDS = {
+    "camera": CameraEntry,
+    "initial_guess": InitialGuessRecord,
+    "calibration": CalibrationRecord,
+    "quality": QualityRecord,
+}
+
+
+@dataclass
+class JobRecord:
+    """``calib.json``'s ``nbcalib`` section (module docstring); None: not recorded."""
+
+    camera: CameraEntry | None = None
+    result_times: dict | None = None
+    result_values: dict | None = None
+    virtual_camera: dict | None = None
+    preprocess: dict | None = None
+    inputs: dict | None = None
+    config: dict | None = None
+    run: dict | None = None
+    made: dict | None = None
+    seconds: dict | None = None
+    initial_guess: InitialGuessRecord | None = None
+    calibration: CalibrationRecord | None = None
+    quality: QualityRecord | None = None
+    other: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> JobRecord:
+        """The record of a parsed ``nbcalib`` section (unknown or malformed entries kept)."""
+        checks = {key: _is_dict for key in (*_MAPPINGS, *_RECORDS)}
+        known, other = _split(data, checks)
+        for key, kind in _RECORDS.items():
+            if key in known:
+                known[key] = kind.from_dict(known[key])
+        return cls(**known, other=other)
+
+    def to_dict(self) -> dict:
+        """The ``nbcalib`` section to write (entries not recorded left out)."""
+        known = {}
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name == "other" or value is None:
+                continue
+            known[f.name] = value.to_dict() if f.name in _RECORDS else value
+        return _join(self.other, known)
+
+    def __bool__(self) -> bool:
+        return bool(self.to_dict())
+
+    # ------------------------------------------------------------------ entries by stage
+    def guess(self) -> InitialGuessRecord:
+        """:attr:`initial_guess`, made empty first if not recorded."""
+        if self.initial_guess is None:
+            self.initial_guess = InitialGuessRecord()
+        return self.initial_guess
+
+    def set_made(self, stage: str, recipe: dict, seconds: float) -> None:
+        """Record what made ``stage``'s product and how long it took."""
+        if self.made is None:
+            self.made = {}
+        self.made[stage] = recipe
+        if self.seconds is None:
+            self.seconds = {}
+        self.seconds[stage] = seconds
+
+    def forget_made(self, stage: str) -> None:
+        """Forget what made ``stage`` (its product is gone or stale)."""
+        if self.made is not None:
+            self.made.pop(stage, None)
+
+    def stamp(self, stage: str, time: str, values: list) -> None:
+        """Record when a result was written, and its values then."""
+        if self.result_times is None:
+            self.result_times = {}
+        if self.result_values is None:
+            self.result_values = {}
+        self.result_times[stage] = time
+        self.result_values[stage] = values
+
+    def unstamp(self, stage: str) -> None:
+        """Forget a removed result's time and values."""
+        for stamps in (self.result_times, self.result_values):
+            if stamps is not None:
+                stamps.pop(stage, None)
