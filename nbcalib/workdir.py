@@ -48,6 +48,7 @@ import numpy as np
 from nbcalib.errors import InputError
 from nbcalib.io.calib_json import CalibFile, read_calib_json, write_calib_json
 from nbcalib.io.index_map import read_index_map, write_index_map
+from nbcalib.io.job_record import VirtualCameraEntry
 from nbcalib.products import PairData, VirtualCamera
 
 if TYPE_CHECKING:  # the camera module loads the numba kernels
@@ -78,7 +79,6 @@ NOT_APPLICABLE = "N/A"
 #: Folders of products derived from a result (nbcalib's report and exports).
 DERIVED_FOLDERS = ("report", "export")
 
-_VIRTUAL_CAMERA_KEY = "virtual_camera"
 _CORRESPONDENCES_FORMAT = "nbcalib-correspondences"
 
 
@@ -121,10 +121,8 @@ def set_virtual_camera(calib: CalibFile, virtual: VirtualCamera) -> None:
     T = np.asarray(virtual.T_vcam_lidar, dtype=np.float64)
     if T.shape != (4, 4) or not np.all(np.isfinite(T)):
         raise ValueError(f"T_vcam_lidar must be a finite 4 x 4 matrix, got shape {T.shape}")
-    entry = {"camera": virtual.camera.to_dict(), "T_vcam_lidar": T.tolist()}
-    if virtual.fov_deg is not None:
-        entry["lidar_fov_deg"] = float(virtual.fov_deg)
-    calib.record.virtual_camera = entry
+    fov = None if virtual.fov_deg is None else float(virtual.fov_deg)
+    calib.record.virtual_camera = VirtualCameraEntry(virtual.camera.to_dict(), T.tolist(), fov)
 
 
 def get_virtual_camera(calib: CalibFile) -> VirtualCamera | None:
@@ -164,14 +162,15 @@ def get_virtual_camera(calib: CalibFile) -> VirtualCamera | None:
         )
         return virtual
     try:
-        camera = CameraModel.from_dict(entry["camera"])
-        T = np.array(entry["T_vcam_lidar"], dtype=np.float64)
+        if entry.camera is None or entry.T_vcam_lidar is None:
+            raise ValueError("no camera or no T_vcam_lidar")
+        camera = CameraModel.from_dict(entry.camera)
+        T = np.array(entry.T_vcam_lidar, dtype=np.float64)
         if T.shape != (4, 4) or not np.all(np.isfinite(T)):
             raise ValueError("T_vcam_lidar is not a finite 4 x 4 matrix")
-        fov = entry.get("lidar_fov_deg")
-        fov = float(fov) if isinstance(fov, (int, float)) else None
     except (KeyError, TypeError, ValueError) as exc:
-        raise InputError(f"invalid nbcalib.{_VIRTUAL_CAMERA_KEY}: {exc}", calib.path) from None
+        raise InputError(f"invalid nbcalib.virtual_camera: {exc}", calib.path) from None
+    fov = None if entry.lidar_fov_deg is None else float(entry.lidar_fov_deg)
     return VirtualCamera(camera, T, fov)
 
 

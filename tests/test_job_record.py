@@ -17,7 +17,7 @@ SECTION = {
     "camera": {"camera_model": "pinhole", "width": 640, "height": 480},
     "result_times": {FINAL_STAGE: "2026-12-05T10:00:00.000001+00:00"},
     "result_values": {FINAL_STAGE: [0.1, 0, 0, 0, 0, 0, 1]},
-    "virtual_camera": {"camera": {}, "T_vcam_lidar": [[1.0]]},
+    "virtual_camera": {"camera": {}, "T_vcam_lidar": [[1.0]], "lidar_fov_deg": 70},
     "preprocess": {"pairs": {"a": {}}, "lidar_fov_deg": 70.0},
     "inputs": {"points": ["a.pcd"]},
     "config": {"refine": {"bins": 16}},
@@ -57,6 +57,7 @@ def test_a_round_trip_is_exact_and_typed():
     assert record.quality.assessed_T_lidar_camera == [0.1, 0, 0, 0, 0, 0, 1]
     assert record.quality.figures == {"verdict": "ok"}
     assert record.other == {"unknown": {"kept": [1, 2]}}
+    assert record.virtual_camera.lidar_fov_deg == 70 and record.virtual_camera.camera == {}
 
 
 def test_malformed_entries_read_as_absent_and_are_written_back():

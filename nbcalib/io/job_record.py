@@ -3,10 +3,10 @@
 The reference toolbox ignores ``calib.json``'s ``nbcalib`` section; nbcalib keeps in it what a
 job did and how, so that a later command can resume, judge or report it. :class:`JobRecord` is
 that section, one attribute per entry; the entries read field by field have record types of
-their own (:class:`CameraEntry`, :class:`InitialGuessRecord`, :class:`CalibrationRecord`,
-:class:`QualityRecord`), and the entries another module writes and reads whole (the config
-tree, the inputs, the run's options, the preprocessing summary, what made each stage) stay
-mappings in that module's own format.
+their own (:class:`CameraEntry`, :class:`VirtualCameraEntry`, :class:`InitialGuessRecord`,
+:class:`CalibrationRecord`, :class:`QualityRecord`), and the entries another module writes and
+reads whole (the config tree, the inputs, the run's options, the preprocessing summary, what
+made each stage) stay mappings in that module's own format.
 
 ``nbcalib`` section of ``calib.json``:
 
@@ -16,7 +16,7 @@ key                        attribute
 ``camera``                 :attr:`JobRecord.camera` (model name and image size)
 ``result_times``           :attr:`JobRecord.result_times` (``{stage: ISO 8601 time}``)
 ``result_values``          :attr:`JobRecord.result_values` (``{stage: [7 numbers]}``)
-``virtual_camera``         :attr:`JobRecord.virtual_camera` (:mod:`nbcalib.workdir`'s)
+``virtual_camera``         :attr:`JobRecord.virtual_camera` (the LiDAR images' camera)
 ``preprocess``             :attr:`JobRecord.preprocess` (pairs' summaries, LiDAR field of view)
 ``inputs``                 :attr:`JobRecord.inputs` (the job's inputs, as given)
 ``config``                 :attr:`JobRecord.config` (:func:`nbcalib.config.config_to_dict`)
@@ -45,6 +45,7 @@ __all__ = [
     "InitialGuessRecord",
     "JobRecord",
     "QualityRecord",
+    "VirtualCameraEntry",
 ]
 
 
@@ -62,6 +63,10 @@ def _is_list(value) -> bool:
 
 def _is_bool(value) -> bool:
     return isinstance(value, bool)
+
+
+def _is_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
 def _is_size(value) -> bool:
@@ -116,6 +121,47 @@ class CameraEntry:
         if self.width is None or self.height is None:
             return None
         return self.width, self.height
+
+
+@dataclass
+class VirtualCameraEntry:
+    """``nbcalib.virtual_camera``: the camera that rendered the LiDAR images.
+
+    :func:`nbcalib.workdir.set_virtual_camera` and :func:`~nbcalib.workdir.get_virtual_camera`
+    turn it into a :class:`~nbcalib.preprocess.lidar_image.VirtualCamera` and back.
+
+    Attributes
+    ----------
+    camera : dict or None
+        :meth:`nbcalib.camera.CameraModel.to_dict` of its camera.
+    T_vcam_lidar : list or None
+        Its pose, 4 x 4 nested lists (maps LiDAR points into the virtual camera's frame).
+    lidar_fov_deg : float or None
+        The LiDAR's field of view it was chosen for.
+    """
+
+    camera: dict | None = None
+    T_vcam_lidar: list | None = None
+    lidar_fov_deg: float | None = None
+    other: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> VirtualCameraEntry:
+        """The entry of a parsed ``nbcalib.virtual_camera``."""
+        checks = {"camera": _is_dict, "T_vcam_lidar": _is_list, "lidar_fov_deg": _is_number}
+        known, other = _split(data, checks)
+        return cls(**known, other=other)
+
+    def to_dict(self) -> dict:
+        """The ``nbcalib.virtual_camera`` to write."""
+        return _join(
+            self.other,
+            {
+                "camera": self.camera,
+                "T_vcam_lidar": self.T_vcam_lidar,
+                "lidar_fov_deg": self.lidar_fov_deg,
+            },
+        )
 
 
 @dataclass
@@ -238,7 +284,6 @@ class QualityRecord:
 _MAPPINGS = (
     "result_times",
     "result_values",
-    "virtual_camera",
     "preprocess",
     "inputs",
     "config",
@@ -249,6 +294,7 @@ _MAPPINGS = (
 #: Entries with record types of their own: key -> type.
 _RECORDS = {
     "camera": CameraEntry,
+    "virtual_camera": VirtualCameraEntry,
     "initial_guess": InitialGuessRecord,
     "calibration": CalibrationRecord,
     "quality": QualityRecord,
@@ -262,7 +308,7 @@ class JobRecord:
     camera: CameraEntry | None = None
     result_times: dict | None = None
     result_values: dict | None = None
-    virtual_camera: dict | None = None
+    virtual_camera: VirtualCameraEntry | None = None
     preprocess: dict | None = None
     inputs: dict | None = None
     config: dict | None = None
