@@ -39,7 +39,7 @@ from nbcalib._threads import thread_map
 from nbcalib.config import CalibrationConfig, config_to_dict, write_config
 from nbcalib.errors import InputError
 from nbcalib.io.calib_json import AUTO_STAGE, FINAL_STAGE, MANUAL_STAGE
-from nbcalib.io.job_record import CalibrationRecord
+from nbcalib.io.job_record import CalibrationRecord, GuessFigures
 from nbcalib.products import CalibrationResult, Start, as_stored_values
 from nbcalib.resume import STAGES, plan_stages
 from nbcalib.workdir import WorkDir
@@ -390,22 +390,22 @@ class Calibrator:
         calib = self._calib()
         if calib is not None:
             calib.set_T_camera_lidar(stage, self.start.T_camera_lidar)
-            calib.record.guess().stages[stage] = {
-                "correspondences": len(corr),
-                "ransac_inliers": guess.ransac.n_inliers,
-                "inliers": guess.n_inliers,
-                "rms_px": None if not np.isfinite(guess.rms_px) else round(guess.rms_px, 4),
-                "support": guess.support,
-                "runner_up": guess.runner_up,
-                "runner_up_shared": guess.runner_up_shared,
-                "bound_m": _rounded(guess.bound_m, 5),
-                "bound_deg": _rounded(guess.bound_deg, 4),
-                "success": bool(guess.success),
-                "seed": self.config.seed,
-                "confidence_weights": bool(cfg.confidence_weights and corr.confidence is not None),
-                "source": str(self._manual) if manual else "matches",
-                "matcher": matcher,
-            }
+            calib.record.guess().stages[stage] = GuessFigures.make(
+                correspondences=len(corr),
+                ransac_inliers=guess.ransac.n_inliers,
+                inliers=guess.n_inliers,
+                rms_px=None if not np.isfinite(guess.rms_px) else round(guess.rms_px, 4),
+                support=guess.support,
+                runner_up=guess.runner_up,
+                runner_up_shared=guess.runner_up_shared,
+                bound_m=_rounded(guess.bound_m, 5),
+                bound_deg=_rounded(guess.bound_deg, 4),
+                success=bool(guess.success),
+                seed=self.config.seed,
+                confidence_weights=bool(cfg.confidence_weights and corr.confidence is not None),
+                source=str(self._manual) if manual else "matches",
+                matcher=matcher,
+            )
         self._remember("initial-guess", calib)
 
     def _refine(self) -> None:
@@ -450,32 +450,25 @@ class Calibrator:
             from nbcalib.transforms import invert_T, pose_error
 
             dt, dr = pose_error(invert_T(result.T_camera_lidar), invert_T(start.T_camera_lidar))
-            calib.record.calibration = CalibrationRecord(
+            calib.record.calibration = CalibrationRecord.make(
                 start=start.source,
                 start_T_lidar_camera=start.values,
                 start_uncertainty=_uncertainty_record(start.uncertainty),
                 converged=result.converged,
-                figures={
-                    "optimizer": cfg.optimizer,
-                    "cost": cfg.cost,
-                    "bins": cfg.bins,
-                    "pyramid_levels": cfg.pyramid_levels,
-                    "pairs": [p.name for p in pairs],
-                    "nid": result.nid,
-                    "nid_start": result.history[0].nid_start,
-                    "nid_history": [result.history[0].nid_start, *(h.nid for h in result.history)],
-                    "outer_iterations": len(result.history),
-                    "iterations": result.iterations,
-                    "evaluations": result.evaluations,
-                    "stopped": result.stopped,
-                    "seconds": round(time.perf_counter() - t0, 3),
-                    "change_from_start": {"translation_m": float(dt), "rotation_deg": float(dr)},
-                    "trust_region": {
-                        "translation_m": cfg.trust_translation,
-                        "rotation_deg": cfg.trust_rotation_deg,
-                    },
-                    "at_trust_boundary": result.at_trust_boundary,
-                },
+                optimizer=cfg.optimizer,
+                cost=cfg.cost,
+                bins=cfg.bins,
+                pyramid_levels=cfg.pyramid_levels,
+                pairs=[p.name for p in pairs],
+                nid=result.nid,
+                nid_history=[result.history[0].nid_start, *(h.nid for h in result.history)],
+                iterations=result.iterations,
+                evaluations=result.evaluations,
+                stopped=result.stopped,
+                seconds=round(time.perf_counter() - t0, 3),
+                change_from_start=(dt, dr),
+                trust_region=(cfg.trust_translation, cfg.trust_rotation_deg),
+                at_trust_boundary=result.at_trust_boundary,
             )
         if result.at_trust_boundary:
             self._refine_failed(calib, start, result)

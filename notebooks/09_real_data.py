@@ -589,11 +589,11 @@ if auto_status != 0:
     nbcalib_command("initial-guess", auto_work, "--force")
 auto_calib = read_calib_json(auto_work / "calib.json")
 auto_record = auto_calib.record.initial_guess.stages["init_T_lidar_camera_auto"]
-auto_success = bool(auto_record["success"])
+auto_success = bool(auto_record.success)
 auto_error = pose_errors(auto_calib.get_T_camera_lidar("init_T_lidar_camera_auto"), T_ref)
 print(
-    f"matcher {auto_record['matcher']}: {auto_record['inliers']} of "
-    f"{auto_record['correspondences']} correspondences agree; success flag: {auto_success}"
+    f"matcher {auto_record.matcher}: {auto_record.inliers} of "
+    f"{auto_record.correspondences} correspondences agree; success flag: {auto_success}"
 )
 print(
     f"the guess is {100 * auto_error['translation_error_m']:.1f} cm and "

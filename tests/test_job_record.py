@@ -112,3 +112,60 @@ def test_empty_and_the_bookkeeping_helpers():
         "nid": 1.0,
     }
     assert InitialGuessRecord().to_dict() == {}
+
+
+def test_the_writers_spell_the_figures_once():
+    from nbcalib.io.job_record import GuessFigures
+
+    figures = GuessFigures.make(
+        correspondences=10,
+        ransac_inliers=8,
+        inliers=9,
+        rms_px=None,
+        support=3.0,
+        runner_up=1.0,
+        runner_up_shared=0.5,
+        bound_m=0.01,
+        bound_deg=0.1,
+        success=True,
+        seed=0,
+        confidence_weights=False,
+        source="matches",
+        matcher="xfeat-lighterglue",
+    )
+    assert (figures.success, figures.matcher, figures.inliers, figures.correspondences) == (
+        True,
+        "xfeat-lighterglue",
+        9,
+        10,
+    )
+    assert figures.to_dict()["rms_px"] is None  # a figure not measured is written as null
+    record = InitialGuessRecord({AUTO_STAGE: figures})
+    again = InitialGuessRecord.from_dict(record.to_dict())
+    assert again.stages[AUTO_STAGE] == figures and again.matcher(AUTO_STAGE) == "xfeat-lighterglue"
+    cal = CalibrationRecord.make(
+        start=AUTO_STAGE,
+        start_T_lidar_camera=[0, 0, 0, 0, 0, 0, 1],
+        start_uncertainty=None,
+        converged=True,
+        optimizer="hybrid",
+        cost="regional",
+        bins=16,
+        pyramid_levels=2,
+        pairs=["a"],
+        nid=1.0,
+        nid_history=[1.2, 1.1, 1.0],
+        iterations=5,
+        evaluations=9,
+        stopped="converged",
+        seconds=1.5,
+        change_from_start=(0.01, 0.2),
+        trust_region=(0.5, 5.0),
+        at_trust_boundary=False,
+    )
+    out = cal.to_dict()
+    assert (
+        out["nid_start"] == 1.2 and out["outer_iterations"] == 2 and "start_uncertainty" not in out
+    )
+    assert out["change_from_start"] == {"translation_m": 0.01, "rotation_deg": 0.2}
+    assert CalibrationRecord.from_dict(out) == cal and cal.nid_history == [1.2, 1.1, 1.0]

@@ -42,6 +42,7 @@ from typing import Any
 __all__ = [
     "CalibrationRecord",
     "CameraEntry",
+    "GuessFigures",
     "InitialGuessRecord",
     "JobRecord",
     "QualityRecord",
@@ -67,6 +68,10 @@ def _is_bool(value) -> bool:
 
 def _is_number(value) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
+
+
+def _is_count(value) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value >= 0
 
 
 def _is_size(value) -> bool:
@@ -165,19 +170,95 @@ class VirtualCameraEntry:
 
 
 @dataclass
+class GuessFigures:
+    """``nbcalib.initial_guess.<result key>``: one written guess's figures, as written.
+
+    Written through :meth:`make` (every figure by name); read through the attributes below.
+    """
+
+    values: dict = field(default_factory=dict)
+
+    @classmethod
+    def make(
+        cls,
+        *,
+        correspondences: int,
+        ransac_inliers: int,
+        inliers: int,
+        rms_px: float | None,
+        support,
+        runner_up,
+        runner_up_shared,
+        bound_m: float | None,
+        bound_deg: float | None,
+        success: bool,
+        seed: int,
+        confidence_weights: bool,
+        source: str,
+        matcher: str | None,
+    ) -> GuessFigures:
+        """The figures of a guess (:class:`nbcalib.initial_guess.estimate.InitialGuess`)."""
+        return cls(
+            {
+                "correspondences": correspondences,
+                "ransac_inliers": ransac_inliers,
+                "inliers": inliers,
+                "rms_px": rms_px,
+                "support": support,
+                "runner_up": runner_up,
+                "runner_up_shared": runner_up_shared,
+                "bound_m": bound_m,
+                "bound_deg": bound_deg,
+                "success": success,
+                "seed": seed,
+                "confidence_weights": confidence_weights,
+                "source": source,
+                "matcher": matcher,
+            }
+        )
+
+    def to_dict(self) -> dict:
+        """The entry to write."""
+        return dict(self.values)
+
+    def _get(self, key: str, check: Callable[[Any], bool]):
+        value = self.values.get(key)
+        return value if check(value) else None
+
+    @property
+    def success(self) -> bool | None:
+        """Whether the guess passed its success test."""
+        return self._get("success", _is_bool)
+
+    @property
+    def matcher(self) -> str | None:
+        """The matcher whose matches made it (None: hand-picked, or not recorded)."""
+        return self._get("matcher", _is_str)
+
+    @property
+    def correspondences(self) -> int | None:
+        """Correspondences it was estimated from."""
+        return self._get("correspondences", _is_count)
+
+    @property
+    def inliers(self) -> int | None:
+        """Correspondences its pose explains."""
+        return self._get("inliers", _is_count)
+
+
+@dataclass
 class InitialGuessRecord:
     """``nbcalib.initial_guess``: each written guess's figures, and why the last one failed.
 
     Attributes
     ----------
     stages : dict
-        ``{result key: figures}`` (correspondences, inliers, RMS, bounds, success, matcher, ...)
-        of each guess written, as :class:`nbcalib.pipeline.Calibrator` records them.
+        ``{result key: GuessFigures}`` of each guess written.
     failed : str or None
         Why the automatic guess was not written (a fallback start then stands in).
     """
 
-    stages: dict[str, dict] = field(default_factory=dict)
+    stages: dict[str, GuessFigures] = field(default_factory=dict)
     failed: str | None = None
     other: dict = field(default_factory=dict)
 
@@ -189,16 +270,17 @@ class InitialGuessRecord:
         checks = {"failed": _is_str, **{stage: _is_dict for stage in INITIAL_STAGES}}
         known, other = _split(data, checks)
         failed = known.pop("failed", None)
-        return cls(known, failed, other)
+        return cls({stage: GuessFigures(dict(v)) for stage, v in known.items()}, failed, other)
 
     def to_dict(self) -> dict:
         """The ``nbcalib.initial_guess`` to write."""
-        return _join(self.other, {**self.stages, "failed": self.failed})
+        stages = {stage: figures.to_dict() for stage, figures in self.stages.items()}
+        return _join(self.other, {**stages, "failed": self.failed})
 
     def matcher(self, stage: str) -> str | None:
         """The matcher whose matches made the guess ``stage`` (None: not recorded)."""
-        name = (self.stages.get(stage) or {}).get("matcher")
-        return name if isinstance(name, str) else None
+        figures = self.stages.get(stage)
+        return None if figures is None else figures.matcher
 
 
 #: The fields of :class:`CalibrationRecord` and what their values must be.
@@ -243,6 +325,73 @@ class CalibrationRecord:
     figures: dict = field(default_factory=dict)
 
     @classmethod
+    def make(
+        cls,
+        *,
+        start: str,
+        start_T_lidar_camera: list,
+        start_uncertainty: dict | None,
+        converged: bool,
+        optimizer: str,
+        cost: str,
+        bins: int,
+        pyramid_levels: int,
+        pairs: list[str],
+        nid: float,
+        nid_history: list[float],
+        iterations: int,
+        evaluations: int,
+        stopped: str,
+        seconds: float,
+        change_from_start: tuple[float, float],
+        trust_region: tuple[float, float],
+        at_trust_boundary: bool,
+    ) -> CalibrationRecord:
+        """The record of a fine registration.
+
+        ``nid_history`` runs from the start's NID on; ``change_from_start`` and
+        ``trust_region`` are (metres, degrees).
+        """
+
+        def move(pair):
+            return {"translation_m": float(pair[0]), "rotation_deg": float(pair[1])}
+
+        figures = {
+            "optimizer": optimizer,
+            "cost": cost,
+            "bins": bins,
+            "pyramid_levels": pyramid_levels,
+            "pairs": pairs,
+            "nid": nid,
+            "nid_start": nid_history[0],
+            "nid_history": nid_history,
+            "outer_iterations": len(nid_history) - 1,
+            "iterations": iterations,
+            "evaluations": evaluations,
+            "stopped": stopped,
+            "seconds": seconds,
+            "change_from_start": move(change_from_start),
+            "trust_region": {
+                "translation_m": trust_region[0],
+                "rotation_deg": trust_region[1],
+            },
+            "at_trust_boundary": at_trust_boundary,
+        }
+        return cls(
+            start=start,
+            start_T_lidar_camera=start_T_lidar_camera,
+            start_uncertainty=start_uncertainty,
+            converged=converged,
+            figures=figures,
+        )
+
+    @property
+    def nid_history(self) -> list | None:
+        """NID at the start, then after each outer iteration."""
+        value = self.figures.get("nid_history")
+        return value if isinstance(value, list) else None
+
+    @classmethod
     def from_dict(cls, data: dict) -> CalibrationRecord:
         """The record of a parsed ``nbcalib.calibration``."""
         known, figures = _split(data, _CALIBRATION_CHECKS)
@@ -268,6 +417,15 @@ class QualityRecord:
 
     assessed_T_lidar_camera: list | None = None
     figures: dict = field(default_factory=dict)
+
+    @classmethod
+    def make(cls, figures: dict, *, page: str, written: str, assessed: list) -> QualityRecord:
+        """The record of a report.
+
+        Its ``figures``, its ``page`` (relative to the work directory), when it was
+        ``written`` (ISO 8601) and the result it ``assessed``.
+        """
+        return cls(assessed, {**figures, "report": page, "written": written})
 
     @classmethod
     def from_dict(cls, data: dict) -> QualityRecord:

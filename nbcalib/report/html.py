@@ -190,11 +190,12 @@ def write_report(
             raise
 
         calib = work.read_calib()  # re-read: keep whatever changed meanwhile
-        stored = quality.to_dict()
-        stored["report"] = f"{REPORT_DIR}/index.html"
-        stored["written"] = time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime())
-        assessed = list(calib.results.get(FINAL_STAGE, []))
-        calib.record.quality = QualityRecord(assessed, stored)
+        calib.record.quality = QualityRecord.make(
+            quality.to_dict(),
+            page=f"{REPORT_DIR}/index.html",
+            written=time.strftime("%Y-%m-%dT%H:%M:%SZ", time.gmtime()),
+            assessed=list(calib.results.get(FINAL_STAGE, [])),
+        )
         from nbcalib.io.calib_json import write_calib_json
 
         write_calib_json(work.calib_path, calib)
