@@ -143,22 +143,16 @@ def test_bad_files_and_chains(tmp_path):
         read_kalibr_camchain(_write(tmp_path, f"cam0: {cam}\ncam2: {cam}\n"))
     with pytest.raises(InputError, match="cam1 has no T_cn_cnm1"):
         read_kalibr_camchain(_write(tmp_path, f"cam0: {cam}\ncam1: {cam}\n"))
-    skew = "[[1, 0.2, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]"
-    cam1 = cam[:-1] + f", T_cn_cnm1: {skew}}}"
-    with pytest.raises(InputError, match="not a rotation"):
-        read_kalibr_camchain(_write(tmp_path, f"cam0: {cam}\ncam1: {cam1}\n"))
-    mirror = "[[-1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]"
-    cam1 = cam[:-1] + f", T_cn_cnm1: {mirror}}}"
-    with pytest.raises(InputError, match="not a rotation"):
-        read_kalibr_camchain(_write(tmp_path, f"cam0: {cam}\ncam1: {cam1}\n"))
-    short = "[[1, 0, 0], [0, 1, 0], [0, 0, 1]]"
-    cam1 = cam[:-1] + f", T_cn_cnm1: {short}}}"
-    with pytest.raises(InputError, match="must have 16 numbers"):
-        read_kalibr_camchain(_write(tmp_path, f"cam0: {cam}\ncam1: {cam1}\n"))
-    rows = "[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 1, 1]]"
-    cam1 = cam[:-1] + f", T_cn_cnm1: {rows}}}"
-    with pytest.raises(InputError, match="last row"):
-        read_kalibr_camchain(_write(tmp_path, f"cam0: {cam}\ncam1: {cam1}\n"))
+    bad_transforms = [
+        ("[[1, 0.2, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]", "not a rotation"),  # skew
+        ("[[-1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 0, 1]]", "not a rotation"),  # mirror
+        ("[[1, 0, 0], [0, 1, 0], [0, 0, 1]]", "must have 16 numbers"),
+        ("[[1, 0, 0, 0], [0, 1, 0, 0], [0, 0, 1, 0], [0, 0, 1, 1]]", "last row"),
+    ]
+    for T, message in bad_transforms:
+        cam1 = cam[:-1] + f", T_cn_cnm1: {T}}}"
+        with pytest.raises(InputError, match=message):
+            read_kalibr_camchain(_write(tmp_path, f"cam0: {cam}\ncam1: {cam1}\n"))
 
 
 def test_nbcalib_rig_round_trip_and_either_format_recognised(tmp_path):
