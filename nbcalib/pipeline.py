@@ -39,7 +39,7 @@ from nbcalib._threads import thread_map
 from nbcalib.config import CalibrationConfig, config_to_dict, write_config
 from nbcalib.errors import InputError
 from nbcalib.io.calib_json import AUTO_STAGE, FINAL_STAGE, MANUAL_STAGE
-from nbcalib.io.job_record import CalibrationRecord, GuessFigures
+from nbcalib.io.job_record import CalibrationRecord, GuessFigures, PreprocessSummary, RunOptions
 from nbcalib.products import CalibrationResult, Start, as_stored_values
 from nbcalib.resume import STAGES, plan_stages
 from nbcalib.workdir import WorkDir
@@ -95,7 +95,7 @@ class Calibrator:
         self._guess_failed = False
         self._stage_t0 = time.perf_counter()
         #: How the command line ran the job (``--init``...), recorded for ``nbcalib run WORKDIR``.
-        self.run_options: dict | None = None
+        self.run_options: RunOptions | None = None
 
     # ================================================================ the method
     def run(
@@ -268,10 +268,9 @@ class Calibrator:
             intensity_channel=self.config.preprocess.intensity_channel,
         )
         set_virtual_camera(calib, self.virtual)
-        calib.record.preprocess = {
-            "pairs": {p.name: p.summary for p in self.pairs},
-            "lidar_fov_deg": self.virtual.fov_deg,
-        }
+        calib.record.preprocess = PreprocessSummary(
+            {p.name: p.summary for p in self.pairs}, self.virtual.fov_deg
+        )
         calib.record.inputs = self._inputs_record
         self._remember("preprocess", calib)
 
@@ -789,7 +788,7 @@ class Calibrator:
         if self._inputs_record is not None:
             record.inputs = self._inputs_record
         if self.run_options is not None:
-            record.run = _plain(self.run_options)
+            record.run = RunOptions.from_dict(_plain(self.run_options.to_dict()))
         self.work.write_calib(calib)
         write_config(self.work.config_path, self.config, {"inputs": record.inputs})
 

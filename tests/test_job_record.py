@@ -21,7 +21,15 @@ SECTION = {
     "preprocess": {"pairs": {"a": {}}, "lidar_fov_deg": 70.0},
     "inputs": {"points": ["a.pcd"]},
     "config": {"refine": {"bins": 16}},
-    "run": {"model_dir": None, "init": "0,0,0,0,0,0,1"},
+    "run": {
+        "init": "0,0,0,0,0,0,1",
+        "init_uncertainty": None,
+        "manual": None,
+        "prior": None,
+        "no_matching": None,
+        "no_report": True,
+        "model_dir": None,
+    },
     "made": {"preprocess": {"x": 1}},
     "seconds": {"preprocess": 1.5},
     "initial_guess": {
@@ -58,6 +66,8 @@ def test_a_round_trip_is_exact_and_typed():
     assert record.quality.figures == {"verdict": "ok"}
     assert record.other == {"unknown": {"kept": [1, 2]}}
     assert record.virtual_camera.lidar_fov_deg == 70 and record.virtual_camera.camera == {}
+    assert record.preprocess.pairs == {"a": {}} and record.preprocess.lidar_fov_deg == 70.0
+    assert record.run.given() == {"init": "0,0,0,0,0,0,1", "no_report": True}
 
 
 def test_malformed_entries_read_as_absent_and_are_written_back():

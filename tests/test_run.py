@@ -139,7 +139,7 @@ def test_init_uncertainty_judges_the_move_and_restating_it_redoes_only_the_repor
 ):
     work = _copy(finished, tmp_path)
     calib = read_calib_json(work / "calib.json")
-    calib.record.run["no_report"] = False  # the report this time
+    calib.record.run.no_report = False  # the report this time
     (work / "calib.json").write_text(json.dumps(calib.to_dict()))
     caplog.set_level("INFO", logger="nbcalib")
     assert main(["run", str(work), "--init-uncertainty", "0.002", "0.05"]) == 0

@@ -245,5 +245,5 @@ def stage_calibrator(args: argparse.Namespace, own: tuple[str, ...]):
     )
     model_dir = getattr(args, "model_dir", None)
     check_model_dir(model_dir)
-    model_dir = model_dir or (calib.record.run or {}).get("model_dir")
+    model_dir = model_dir or (calib.record.run.model_dir if calib.record.run else None)
     return Calibrator(build_config(args, base=base), workdir=work, model_dir=model_dir)

@@ -112,17 +112,6 @@ FILE_INPUT_KEYS = (
     "pair_count",
 )
 
-#: Run options a resumed job (``nbcalib run WORKDIR``) keeps from its record.
-REMEMBERED = (
-    "init",
-    "init_uncertainty",
-    "manual",
-    "prior",
-    "no_matching",
-    "no_report",
-    "model_dir",
-)
-
 
 def add_parser(subparsers, formatter_class=argparse.HelpFormatter) -> argparse.ArgumentParser:
     """Register ``run``: its own options, then those of every stage."""
@@ -174,6 +163,7 @@ def run(args: argparse.Namespace) -> int:
     """Run every stage over WORKDIR; returns the exit status."""
     from nbcalib import warmup
     from nbcalib.config import CalibrationConfig, config_from_record
+    from nbcalib.io.job_record import RunOptions
     from nbcalib.pipeline import Calibrator
     from nbcalib.workdir import WorkDir
 
@@ -192,10 +182,10 @@ def run(args: argparse.Namespace) -> int:
     calib = work.read_calib() if work.is_complete() else None
     given_inputs = inputs or points or images or getattr(args, "frames", None) is not None
     resuming = calib is not None and not given_inputs
-    recorded_run = dict(calib.record.run or {}) if resuming else {}
+    recorded_run = calib.record.run.given() if resuming and calib.record.run else {}
     options = {k: v for k, v in file_other.items() if k != "inputs"}
     options.update({k: v for k, v in vars(args).items() if k in _run_dests()})
-    for key in REMEMBERED:
+    for key in RunOptions.names():
         if key not in options and key in recorded_run:
             options[key] = recorded_run[key]
     recorded_inputs = calib.record.inputs if resuming else None
@@ -217,7 +207,7 @@ def run(args: argparse.Namespace) -> int:
     warmup.compiling_note()
     warmup.start()  # a first run: the later stages' kernels compile beside the first ones
     calibrator = Calibrator(config, workdir=work, model_dir=options.get("model_dir"))
-    calibrator.run_options = {k: options.get(k) for k in REMEMBERED}
+    calibrator.run_options = RunOptions.from_dict({k: options.get(k) for k in RunOptions.names()})
     calibrator.run(
         spec,
         init=init,

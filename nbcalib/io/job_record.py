@@ -5,8 +5,9 @@ job did and how, so that a later command can resume, judge or report it. :class:
 that section, one attribute per entry; the entries read field by field have record types of
 their own (:class:`CameraEntry`, :class:`VirtualCameraEntry`, :class:`InitialGuessRecord`,
 :class:`CalibrationRecord`, :class:`QualityRecord`), and the entries another module writes and
-reads whole (the config tree, the inputs, the run's options, the preprocessing summary, what
-made each stage) stay mappings in that module's own format.
+reads whole (the config tree, the inputs, what made each stage) stay mappings in that module's
+own format. :class:`RunOptions` and :class:`PreprocessSummary` type the run's remembered options
+and the preprocessing summary.
 
 ``nbcalib`` section of ``calib.json``:
 
@@ -17,10 +18,10 @@ key                        attribute
 ``result_times``           :attr:`JobRecord.result_times` (``{stage: ISO 8601 time}``)
 ``result_values``          :attr:`JobRecord.result_values` (``{stage: [7 numbers]}``)
 ``virtual_camera``         :attr:`JobRecord.virtual_camera` (the LiDAR images' camera)
-``preprocess``             :attr:`JobRecord.preprocess` (pairs' summaries, LiDAR field of view)
+``preprocess``             :attr:`JobRecord.preprocess` (:class:`PreprocessSummary`)
 ``inputs``                 :attr:`JobRecord.inputs` (the job's inputs, as given)
 ``config``                 :attr:`JobRecord.config` (:func:`nbcalib.config.config_to_dict`)
-``run``                    :attr:`JobRecord.run` (``nbcalib run``'s remembered options)
+``run``                    :attr:`JobRecord.run` (:class:`RunOptions`)
 ``made``                   :attr:`JobRecord.made` (``{stage: recipe}``; absent: not nbcalib's)
 ``seconds``                :attr:`JobRecord.seconds` (``{stage: seconds}``)
 ``initial_guess``          :attr:`JobRecord.initial_guess`
@@ -45,7 +46,9 @@ __all__ = [
     "GuessFigures",
     "InitialGuessRecord",
     "JobRecord",
+    "PreprocessSummary",
     "QualityRecord",
+    "RunOptions",
     "VirtualCameraEntry",
 ]
 
@@ -438,14 +441,83 @@ class QualityRecord:
         return _join(self.figures, {"assessed_T_lidar_camera": self.assessed_T_lidar_camera})
 
 
+@dataclass
+class PreprocessSummary:
+    """``nbcalib.preprocess``: what preprocessing made of each pair, and the LiDAR's view.
+
+    Attributes
+    ----------
+    pairs : dict of str to dict
+        Each pair's summary (:attr:`nbcalib.products.PairData.summary`: mode, scans, points,
+        where the pair sits in its recording), by pair name.
+    lidar_fov_deg : float or None
+        The LiDAR's horizontal field of view the virtual camera was chosen for.
+    """
+
+    pairs: dict = field(default_factory=dict)
+    lidar_fov_deg: float | None = None
+    other: dict = field(default_factory=dict)
+
+    @classmethod
+    def from_dict(cls, data: dict) -> PreprocessSummary:
+        """The record of a parsed ``nbcalib.preprocess``."""
+        known, other = _split(data, {"pairs": _is_dict, "lidar_fov_deg": _is_number})
+        return cls(known.get("pairs", {}), known.get("lidar_fov_deg"), other)
+
+    def to_dict(self) -> dict:
+        """The ``nbcalib.preprocess`` to write."""
+        return _join(self.other, {"pairs": self.pairs, "lidar_fov_deg": self.lidar_fov_deg})
+
+
+@dataclass
+class RunOptions:
+    """``nbcalib.run``: the options ``nbcalib run`` keeps for a resumed job (``run WORKDIR``).
+
+    Each as typed (strings and flags; None: not given). Written with every field, given or
+    not, so that a record says which options a job was run without.
+    """
+
+    init: Any = None
+    init_uncertainty: Any = None
+    manual: Any = None
+    prior: Any = None
+    no_matching: Any = None
+    no_report: Any = None
+    model_dir: Any = None
+    other: dict = field(default_factory=dict)
+
+    @classmethod
+    def names(cls) -> tuple[str, ...]:
+        """The options kept, in the order written."""
+        return tuple(f.name for f in fields(cls) if f.name != "other")
+
+    @classmethod
+    def from_dict(cls, data: dict) -> RunOptions:
+        """The record of a parsed ``nbcalib.run`` (or of the command line's options)."""
+        names = cls.names()
+        known = {key: data[key] for key in names if key in data}
+        other = {key: value for key, value in data.items() if key not in names}
+        return cls(**known, other=other)
+
+    def to_dict(self) -> dict:
+        """The ``nbcalib.run`` to write (every option, None when not given)."""
+        out = dict(self.other)
+        out.update({name: getattr(self, name) for name in self.names()})
+        return out
+
+    def given(self) -> dict:
+        """The options this record holds a value for (``{name: value}``)."""
+        return {
+            name: getattr(self, name) for name in self.names() if getattr(self, name) is not None
+        }
+
+
 #: Entries kept as mappings (each in its own module's format), by key = attribute name.
 _MAPPINGS = (
     "result_times",
     "result_values",
-    "preprocess",
     "inputs",
     "config",
-    "run",
     "made",
     "seconds",
 )
@@ -453,6 +525,8 @@ _MAPPINGS = (
 _RECORDS = {
     "camera": CameraEntry,
     "virtual_camera": VirtualCameraEntry,
+    "preprocess": PreprocessSummary,
+    "run": RunOptions,
     "initial_guess": InitialGuessRecord,
     "calibration": CalibrationRecord,
     "quality": QualityRecord,
@@ -467,10 +541,10 @@ class JobRecord:
     result_times: dict | None = None
     result_values: dict | None = None
     virtual_camera: VirtualCameraEntry | None = None
-    preprocess: dict | None = None
+    preprocess: PreprocessSummary | None = None
     inputs: dict | None = None
     config: dict | None = None
-    run: dict | None = None
+    run: RunOptions | None = None
     made: dict | None = None
     seconds: dict | None = None
     initial_guess: InitialGuessRecord | None = None
