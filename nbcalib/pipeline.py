@@ -96,6 +96,10 @@ class Calibrator:
         self._stage_t0 = time.perf_counter()
         #: How the command line ran the job (``--init``...), recorded for ``nbcalib run WORKDIR``.
         self.run_options: RunOptions | None = None
+        #: Pairs of the other cameras of a rig, refined with this camera's
+        #: (:mod:`nbcalib.rig_pipeline`; each with its ``T_camera_rig``).
+        self.rig_pairs: list = []
+        self._adopted: tuple | None = None  # (T_camera_lidar, source): a result found elsewhere
 
     # ================================================================ the method
     def run(
@@ -412,7 +416,7 @@ class Calibrator:
 
         cfg = self.config.refine
         start = self._start_pose()
-        pairs = self._registration_pairs()
+        pairs = self._registration_pairs() + list(self.rig_pairs)
         log.info(
             "    calibrating %d pair(s), %d points, %s, start: %s",
             len(pairs),
@@ -473,6 +477,45 @@ class Calibrator:
             self._refine_failed(calib, start, result)
         if calib is not None:
             calib.set_T_camera_lidar(FINAL_STAGE, result.T_camera_lidar)
+        self._remember("calibrate", calib)
+
+    def adopt_result(
+        self,
+        T_camera_lidar,
+        source: str,
+        *,
+        start: Start | None = None,
+        converged: bool | None = None,
+    ) -> None:
+        """Take a result found elsewhere as this job's calibration (a rig's joint pose).
+
+        Recorded as the calibrate stage's product: ``calib.json`` gets it as
+        ``T_lidar_camera`` with a calibration record naming ``source`` (and this camera's own
+        ``start``, which the report judges the move from); the report is then made as for a
+        result of this job's own.
+        """
+        T = np.asarray(T_camera_lidar, dtype=np.float64)
+        self._adopted = (as_stored_values(T), source)
+        self.refinement = None
+        if start is not None:
+            self.start = start
+        self._forget_after("calibrate")
+        calib = self._calib()
+        if calib is not None:
+            from nbcalib.transforms import invert_T, pose_error
+
+            record = {}
+            if start is not None:
+                record = {
+                    "start": start.source,
+                    "start_T_lidar_camera": start.values,
+                    "start_uncertainty": _uncertainty_record(start.uncertainty),
+                    "change_from_start": pose_error(invert_T(T), invert_T(start.T_camera_lidar)),
+                }
+            calib.record.calibration = CalibrationRecord.adopted(
+                source, converged=converged, **record
+            )
+            calib.set_T_camera_lidar(FINAL_STAGE, T)
         self._remember("calibrate", calib)
 
     def _refine_failed(self, calib, start: Start, result) -> None:
@@ -570,10 +613,15 @@ class Calibrator:
     # ================================================================ products
     def result(self) -> CalibrationResult | None:
         """The job's result so far (None before fine registration has run or been loaded)."""
-        if self.refinement is None and (self.work is None or not self._has(FINAL_STAGE)):
+        adopted = self._adopted is not None
+        if (
+            self.refinement is None
+            and not adopted
+            and (self.work is None or not self._has(FINAL_STAGE))
+        ):
             return None
         start = self._start_pose(required=False)
-        values = self.result_values if self.refinement is not None else None
+        values = self.result_values if self.refinement is not None or adopted else None
         values = values or self.work.read_calib().results[FINAL_STAGE]
         return CalibrationResult(
             values=tuple(values),
@@ -594,6 +642,8 @@ class Calibrator:
     @property
     def result_values(self) -> list[float]:
         """Fine registration's result as ``calib.json`` holds it: ``T_lidar_camera`` 7 values."""
+        if self.refinement is None and self._adopted is not None:
+            return list(self._adopted[0])
         return as_stored_values(self.refinement.T_camera_lidar)
 
     @property
@@ -735,7 +785,7 @@ class Calibrator:
         )
 
     def _result_pose(self) -> np.ndarray:
-        if self.refinement is not None:
+        if self.refinement is not None or self._adopted is not None:
             return self.T_result
         calib = self.work.read_calib()
         if not calib.has_result(FINAL_STAGE):
@@ -771,7 +821,14 @@ class Calibrator:
             )
         if stage == "calibrate":
             given = None if self._given is None else self._given.values
-            return _plain({"refine": c["refine"], "start": given})
+            recipe = {"refine": c["refine"], "start": given}
+            if self.rig_pairs:  # the other cameras' pairs and where the rig puts them
+                recipe["rig_pairs"] = {
+                    p.name: as_stored_values(p.T_camera_rig) for p in self.rig_pairs
+                }
+            if self._adopted is not None:
+                recipe["adopted"] = {"T_lidar_camera": self._adopted[0], "from": self._adopted[1]}
+            return _plain(recipe)
         start = self._report_start()
         stated = None if start is None else start.uncertainty
         return _plain({"assess": c["assess"], "refine": c["refine"], "start_uncertainty": stated})

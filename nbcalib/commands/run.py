@@ -47,6 +47,12 @@ Resumes: stages whose products WORKDIR already holds, made with the same setting
 started with. A finished result is not overwritten without --force (every stage) or --from
 STAGE.
 
+Several cameras (a bag with several image topics, or --camera-topics): each camera is
+calibrated in WORKDIR/<camera>/ (a one-camera work directory), the recording read and each
+dense cloud made once for all; WORKDIR/rig.json lists the cameras, their results and the
+camera-to-camera transforms the results imply. With --rig FILE (known camera-to-camera
+extrinsics) one rig pose is refined from every camera's pairs at once (docs/multi_camera.md).
+
 The initial guess is automatic (keypoint matches); --manual FILE uses hand-picked
 correspondences instead; --init POSE is the fallback when the automatic guess fails (or the start
 itself with --no-matching). --config FILE (TOML or YAML) supplies settings; those used are
@@ -64,6 +70,8 @@ examples:
   nbcalib run work/                                              # continue an interrupted job
   nbcalib run work/ --from calibrate --optimizer nelder_mead     # redo the last stages
   nbcalib run --config job.toml data.bag work/
+  nbcalib run ring.bag work/                   # every camera of a bag with several image topics
+  nbcalib run ring.bag work/ --camera-topics /front/image,/left/image --rig camchain.yaml
   nbcalib evaluate work/ --ground-truth ground_truth.json
 
 job.toml (tables are the config's sections; keys their settings, or option names):
@@ -95,6 +103,10 @@ RUN_OPTIONS = (
            "X,Y,Z,QX,QY,QZ,QW"),
     Option("--model-dir", "", "exported models (default: $NBCALIB_MODEL_DIR or the user cache)",
            "DIR"),
+    Option("--camera-topics", "", "several cameras: their image topics, comma-separated "
+           "(default: every image topic of a bag that has several)", "T1,T2,..."),
+    Option("--rig", "", "several cameras with known camera-to-camera extrinsics (a Kalibr "
+           "camchain or an nbcalib rig file): one rig pose from every camera", "FILE"),
 )  # fmt: skip
 
 #: Inputs a config file may give by option name (``frames = "kitti/"``), as on the command line.
@@ -204,8 +216,25 @@ def run(args: argparse.Namespace) -> int:
     if "model_dir" in vars(args) or "model_dir" in file_other:
         check_model_dir(options.get("model_dir"))
     force = bool(options.get("force"))
+    spec, cameras, rig, rig_file = _cameras(spec, config, workdir, options, given_inputs)
     warmup.compiling_note()
     warmup.start()  # a first run: the later stages' kernels compile beside the first ones
+    if cameras is not None:
+        from nbcalib.rig_pipeline import RigCalibrator
+
+        job = RigCalibrator(
+            config, workdir=workdir, model_dir=options.get("model_dir"), rig=rig, rig_file=rig_file
+        )
+        result = job.run(
+            spec,
+            cameras,
+            until=options.get("until"),
+            redo_from="preprocess" if force else options.get("from_stage"),
+            overwrite=force or options.get("from_stage") is not None,
+            skip={"report": "--no-report"} if options.get("no_report") else None,
+        )
+        _rig_summary(job, result)
+        return 0
     calibrator = Calibrator(config, workdir=work, model_dir=options.get("model_dir"))
     calibrator.run_options = RunOptions.from_dict({k: options.get(k) for k in RunOptions.names()})
     calibrator.run(
@@ -221,6 +250,74 @@ def run(args: argparse.Namespace) -> int:
     )
     _summary(calibrator)
     return 0
+
+
+def _cameras(spec, config, workdir, options, given_inputs):
+    """(spec, cameras or None, rig or None, rig file or None) of the job; continues a rig job.
+
+    ``nbcalib run WORKDIR`` of a several-camera job takes its inputs, cameras and rig file
+    from ``WORKDIR/rig.json``.
+    """
+    from pathlib import Path
+
+    from nbcalib.preprocess.inputs import InputSpec
+    from nbcalib.rig_pipeline import CameraSource, find_cameras, read_rig_job
+
+    topics = options.get("camera_topics")
+    rig_path = options.get("rig")
+    job = None if given_inputs else read_rig_job(workdir)
+    if job is not None:  # nbcalib run WORKDIR of a several-camera job
+        spec = InputSpec.from_dict(job.get("inputs") or {})
+        recorded = [CameraSource(c["name"], c["image_topic"], c.get("camera_info_topic"))
+                    for c in job["cameras"]]  # fmt: skip
+        rig_path = rig_path or job.get("rig_file")
+        topics = topics or ",".join(c.image_topic for c in recorded)
+    elif not given_inputs and topics is None and rig_path is None:
+        return spec, None, None, None  # nbcalib run WORKDIR of a one-camera job
+    if topics is not None:
+        topics = [t.strip() for t in str(topics).split(",") if t.strip()]
+    cameras = find_cameras(spec, config.preprocess, topics)
+    if cameras is None:
+        if rig_path is not None:
+            raise InputError("--rig is for several cameras: give a bag with several image topics")
+        return spec, None, None, None
+    for flag in ("init", "manual", "prior", "no_matching"):
+        if options.get(flag):
+            raise InputError(
+                f"--{flag.replace('_', '-')} is for one camera; several cameras find their "
+                "starts by matching"
+            )
+    rig = None
+    if rig_path is not None:
+        from nbcalib.io.rig import read_rig
+
+        rig = read_rig(rig_path)
+        rig_path = str(Path(rig_path).absolute())
+    return spec, cameras, rig, rig_path
+
+
+def _rig_summary(job, result) -> None:
+    """One line per camera (its result and verdict), the rig, and where it all is."""
+    import numpy as np
+
+    from nbcalib.transforms import pose_to_xyz_quat
+
+    for name, res in result.cameras.items():
+        if res is None:
+            print(f"{name}: no result")
+            continue
+        values = ", ".join(f"{v:.6f}" for v in res.values)
+        verdict = f", verdict {res.quality.verdict}" if res.quality is not None else ""
+        print(f"{name}: T_lidar_camera = [{values}]{verdict}")
+    how = "given (--rig), one pose from every camera" if result.joint else "implied by the results"
+    print(f"camera-to-camera transforms ({how}), T_{result.reference}_camera:")
+    for name, T in result.T_ref_camera.items():
+        values = ", ".join(f"{v:.6f}" for v in pose_to_xyz_quat(np.asarray(T)))
+        error = result.rig_errors.get(name)
+        off = "" if error is None else f"  ({100 * error[0]:.2f} cm, {error[1]:.3f} deg from --rig)"
+        print(f"  {name}: [{values}]{off}")
+    print(f"nbcalib run: {len(result.cameras)} cameras in {result.seconds:.1f} s; "
+          f"job in {job.workdir / 'rig.json'}")  # fmt: skip
 
 
 def _run_dests() -> set[str]:

@@ -35,6 +35,14 @@ also gets pair_NNN_scans/scan_MMMM.pcd, one per scan) or one bag (ROS 1 .bag, RO
 mcap folder) with /points (PointCloud2: x, y, z, intensity, t, ring), /image, /camera_info and
 /tf_static (lidar -> camera).
 
+--cameras MODEL[:WxH],... simulates a camera ring around the LiDAR instead of one camera:
+cam0 (the first, the rig's reference: the extrinsic and --image-size of one camera), cam1...
+turned about the LiDAR by a share of a full turn (spinning LiDARs) or spread over +-20 degrees
+(livox), each with its own small offset, lens and image size (1024x768 unless given). Files go
+to OUT/<camera>/pair_NNN.png and OUT/<camera>/camera.yaml beside the shared pair_NNN.pcd; bags
+get /<camera>/image and /<camera>/camera_info per camera; ground_truth.json keeps cam0 at the
+top and lists every camera under "cameras" (with T_cam0_camera, the rig).
+
 --without EFFECTS turns single camera/LiDAR differences off, each on its own, to measure what
 each one costs a calibration (none by default: the rig above, bit for bit); ground_truth.json
 records them as "without". lidar-texture, materials and elements act on the LiDAR's designed
@@ -51,6 +59,8 @@ examples:
   nbcalib synth out --lidar spinning128 --scene street --motion drive --format mcap
   nbcalib synth out --T-lidar-camera 0.05,-0.1,0.02,0.5,-0.5,0.5,-0.5
   nbcalib synth out --lidar spinning64 --without motion,lidar-noise,optics
+  nbcalib synth out --cameras pinhole,fisheye,fisheye --format bag2
+  nbcalib synth out --cameras pinhole:1280x960,fisheye:800x800 --lidar livox
   nbcalib evaluate work --ground-truth out/ground_truth.json
 """
 
@@ -76,6 +86,24 @@ def _without(text: str) -> tuple[str, ...]:
         raise InputError(f"--without: {exc}") from None
 
 
+def _cameras(text: str) -> tuple[str, ...]:
+    """The ring of ``--cameras`` (``model[:WxH]``, comma-separated), checked; InputError if not."""
+    from nbcalib.errors import InputError
+    from nbcalib.synthetic.rig import _ring_spec
+
+    entries = tuple(t.strip() for t in text.split(",") if t.strip())
+    if not entries:
+        raise InputError("--cameras: give at least one camera model")
+    for entry in entries:
+        try:
+            model, _ = _ring_spec(entry)
+        except ValueError as exc:
+            raise InputError(f"--cameras: {exc}") from None
+        if model not in CAMERAS:
+            raise InputError(f"--cameras: unknown camera {model!r}; expected one of {CAMERAS}")
+    return entries
+
+
 def add_parser(subparsers, formatter_class) -> argparse.ArgumentParser:
     """Register ``synth``."""
     p = subparsers.add_parser(
@@ -88,6 +116,13 @@ def add_parser(subparsers, formatter_class) -> argparse.ArgumentParser:
     p.add_argument("out", metavar="OUT", help="output folder (created)")
     p.add_argument("--lidar", choices=LIDARS, default="spinning64", help="LiDAR model")
     p.add_argument("--camera", choices=CAMERAS, default="pinhole", help="camera model")
+    p.add_argument(
+        "--cameras",
+        default=None,
+        metavar="MODEL[:WxH],...",
+        help="a camera ring instead of one camera: a model per camera, the first the reference "
+        f"(models: {', '.join(CAMERAS)})",
+    )
     p.add_argument("--scene", choices=SCENES, default="room", help="kind of scene")
     p.add_argument("--pairs", type=int, default=1, metavar="N", help="number of LiDAR-image pairs")
     p.add_argument("--seed", type=int, default=0, metavar="S", help="seed of everything")
@@ -172,6 +207,7 @@ def run(args) -> int:
     if not 0.0 <= args.modality_gap <= 1.0:
         raise InputError(f"--modality-gap must be in [0, 1], got {args.modality_gap}")
     without = _without(args.without or "")
+    cameras = _cameras(args.cameras) if args.cameras is not None else ()
     T_camera_lidar = None
     if args.T_lidar_camera is not None:
         from nbcalib.transforms import invert_T, pose_from_xyz_quat
@@ -196,13 +232,15 @@ def run(args) -> int:
         modality_gap=args.modality_gap,
         without=without,
         parallel=args.parallel,
+        cameras=cameras,
     )
     start = time.perf_counter()
     truth = export_dataset(config, out, pairs=args.pairs, fmt=args.fmt, progress=True)
     points = sum(p["num_points"] for p in truth["pairs"])
+    sensors = args.camera if not cameras else f"{len(cameras)} cameras ({','.join(cameras)})"
     print(
         f"nbcalib synth: {args.pairs} pair(s), {points} LiDAR points, {args.lidar} + "
-        f"{args.camera} in a {args.scene}, {args.fmt}, in {time.perf_counter() - start:.1f} s; "
+        f"{sensors} in a {args.scene}, {args.fmt}, in {time.perf_counter() - start:.1f} s; "
         f"ground truth: {out / 'ground_truth.json'}"
     )
     return 0

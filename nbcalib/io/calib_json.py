@@ -504,6 +504,33 @@ def values_from_T_camera_lidar(T_camera_lidar: np.ndarray) -> list[float]:
 
 
 # ---------------------------------------------------------------------- ground truth
+def read_ground_truth_cameras(path: str | os.PathLike) -> dict[str, np.ndarray]:
+    """Each camera's true ``T_camera_lidar`` of a camera ring's ``ground_truth.json``.
+
+    ``{"cameras": [{"name": ..., "T_lidar_camera": [x, y, z, qx, qy, qz, qw]}, ...]}`` as
+    ``nbcalib synth --cameras`` writes; empty when the file has no camera list.
+    """
+    data = read_json(path)
+    if not isinstance(data, dict):
+        raise InputError(f"expected a JSON object at the top level, got {_kind(data)}", path)
+    entries = data.get("cameras")
+    if entries is None:
+        return {}
+    if not isinstance(entries, list):
+        raise InputError(f"cameras: expected a list, got {_kind(entries)}", path)
+    out = {}
+    for k, entry in enumerate(entries):
+        if not isinstance(entry, dict) or not isinstance(entry.get("name"), str):
+            raise InputError(f"cameras[{k}]: expected an object with a name", path)
+        what = f"cameras[{k}].T_lidar_camera"
+        if "T_lidar_camera" not in entry:
+            raise InputError(f"{what} missing", path)
+        out[entry["name"]] = T_camera_lidar_from_values(
+            entry["T_lidar_camera"], what=what, path=path
+        )
+    return out
+
+
 def read_ground_truth(path: str | os.PathLike) -> np.ndarray:
     """Read the true ``T_camera_lidar`` from a ``ground_truth.json`` or a ``calib.json``.
 

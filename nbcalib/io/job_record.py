@@ -388,6 +388,26 @@ class CalibrationRecord:
             figures=figures,
         )
 
+    @classmethod
+    def adopted(
+        cls,
+        source: str,
+        *,
+        converged: bool | None,
+        start: str | None = None,
+        start_T_lidar_camera: list | None = None,
+        start_uncertainty: dict | None = None,
+        change_from_start: tuple[float, float] | None = None,
+    ) -> CalibrationRecord:
+        """The record of a result found elsewhere (``source``: a rig's joint registration)."""
+        figures = {"adopted_from": source}
+        if change_from_start is not None:
+            figures["change_from_start"] = {
+                "translation_m": float(change_from_start[0]),
+                "rotation_deg": float(change_from_start[1]),
+            }
+        return cls(start, start_T_lidar_camera, start_uncertainty, converged, figures=figures)
+
     @property
     def nid_history(self) -> list | None:
         """NID at the start, then after each outer iteration."""

@@ -82,6 +82,10 @@ class PairInput:
     info : dict
         Where the pair sits in its recording (``first_scan``, ``image_scan``, ...), for the
         work directory's summary.
+    clouds : dict or None
+        Dense clouds made of ``scans``, shared by the pairs of several cameras that hold the
+        same scans (:mod:`nbcalib.rig_pipeline`): accumulated once, for the first camera
+        (:func:`~nbcalib.preprocess.prepare.prepare_pair`). None: not shared.
     """
 
     name: str
@@ -93,6 +97,7 @@ class PairInput:
     image_scan: int | None = None
     image_fraction: float = 0.0
     info: dict = field(default_factory=dict)
+    clouds: dict | None = field(default=None, repr=False)
 
 
 def classify_inputs(

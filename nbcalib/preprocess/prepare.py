@@ -120,6 +120,20 @@ def _accumulate(pair: PairInput, mode: str, config: PreprocessConfig, progress):
     )
 
 
+def _shared_cloud(pair: PairInput, mode: str, config: PreprocessConfig, progress):
+    """The pair's dense cloud; accumulated once for the cameras sharing ``pair.clouds``."""
+    if pair.clouds is None:
+        return _accumulate(pair, mode, config, progress)
+    from dataclasses import asdict
+
+    # the same scans under the same settings (the topics aside) make the same cloud
+    settings = {k: v for k, v in asdict(config).items() if not k.endswith("_topic")}
+    key = (mode, repr(sorted(settings.items())))
+    if key not in pair.clouds:
+        pair.clouds[key] = _accumulate(pair, mode, config, progress)
+    return pair.clouds[key]
+
+
 def _at_image_time(cloud, scan: int, fraction: float) -> tuple[np.ndarray, float]:
     """The cloud's points in the LiDAR frame at ``fraction`` of scan ``scan``; the frame's offset.
 
@@ -169,7 +183,7 @@ def prepare_pair(
     mode = choose_mode(pair, config)
     t0 = time.perf_counter()
     log(f"{pair.name}: {len(pair.scans)} scan(s), {mode} integration")
-    cloud = _accumulate(pair, mode, config, progress=progress and len(pair.scans) > 3)
+    cloud = _shared_cloud(pair, mode, config, progress=progress and len(pair.scans) > 3)
     if len(cloud) == 0:
         raise InputError(
             f"pair '{pair.name}': no point left after accumulation "

@@ -85,6 +85,10 @@ class RegistrationPair:
         Surface-orientation class of each point
         (:func:`~nbcalib.registration.orientation.orientation_classes`), -1 where not known
         yet; computed for the visible points on first use when None.
+    T_camera_rig : ndarray of shape (4, 4), optional
+        For a pair of another camera of a rig: this camera from the rig's reference camera,
+        whose ``T_camera_lidar`` is refined (the pair is seen at ``T_camera_rig @ T``). None:
+        the pair's camera is the one refined.
     """
 
     camera: CameraModel
@@ -93,6 +97,7 @@ class RegistrationPair:
     intensities: np.ndarray
     name: str = ""
     classes: np.ndarray | None = field(default=None, repr=False)
+    T_camera_rig: np.ndarray | None = field(default=None, repr=False, compare=False)
     _edges: tuple | None = field(default=None, repr=False, compare=False)
     _tree: object = field(default=None, repr=False, compare=False)
     _finite: np.ndarray | None = field(default=None, repr=False, compare=False)

@@ -52,11 +52,15 @@ from nbcalib.transforms import invert_T, make_T, so3_exp, transform_points
 
 __all__ = [
     "DEFAULT_DURATION",
+    "RING_IMAGE_SIZE",
     "RigConfig",
+    "RingCamera",
     "SyntheticSequence",
     "camera_lidar_overlap",
     "default_T_camera_lidar",
+    "generate_ring",
     "generate_sequence",
+    "ring_cameras",
 ]
 
 #: Default seconds of LiDAR data per pair: a few seconds of nodding for spinning LiDARs (more for
@@ -115,6 +119,10 @@ class RigConfig:
         Full configurations replacing the presets (their own seeds are replaced per pair).
     camera_model : CameraModel or None
         A camera replacing the example of ``camera``.
+    cameras : tuple of str
+        A camera ring (:func:`ring_cameras`, :func:`generate_ring`): one model per camera,
+        ``model`` or ``model:WxH``, the first the rig's reference camera. Empty (default): the
+        one camera ``camera``.
     """
 
     lidar: str = "spinning64"
@@ -133,6 +141,7 @@ class RigConfig:
     motion_config: MotionConfig | None = None
     render_config: RenderConfig | None = None
     camera_model: CameraModel | None = field(default=None, repr=False)
+    cameras: tuple[str, ...] = ()
 
     def __post_init__(self):
         if self.lidar_config is None and self.lidar not in LIDAR_PRESETS:
@@ -144,6 +153,12 @@ class RigConfig:
         if self.duration is not None and not self.duration > 0:
             raise ValueError(f"duration must be > 0 s, got {self.duration}")
         object.__setattr__(self, "without", check_effects(self.without))
+        if isinstance(self.cameras, str):
+            object.__setattr__(self, "cameras", tuple(self.cameras.split(",")))
+        for text in self.cameras:
+            model, _ = _ring_spec(text)
+            if model not in CAMERA_MODELS:
+                raise ValueError(f"unknown camera {model!r}; expected one of {CAMERA_MODELS}")
         if self.T_camera_lidar is not None:
             T = np.asarray(self.T_camera_lidar, dtype=np.float64)
             invert_T(T)  # validates a rigid 4 x 4
@@ -434,3 +449,125 @@ def camera_lidar_overlap(sequence: SyntheticSequence, *, cell_px: int = 16) -> d
         "points_in_image": float(valid.mean()) if valid.size else 0.0,
         "image_coverage": float((covered & has_ray).sum() / max(1, has_ray.sum())),
     }
+
+
+# ============================================================================ camera rings
+#: Image size of a ring's cameras after the first (the first has the rig's ``image_size``).
+RING_IMAGE_SIZE = (1024, 768)
+
+
+@dataclass(frozen=True)
+class RingCamera:
+    """One camera of a synthetic camera ring (:func:`ring_cameras`).
+
+    Attributes
+    ----------
+    name : str
+        ``cam0``, ``cam1``, ...: the bag's topics are ``/<name>/image`` and
+        ``/<name>/camera_info``, its optical frame ``<name>``.
+    camera : CameraModel
+    T_camera_lidar : ndarray of shape (4, 4)
+        Ground truth, ``p_camera = T_camera_lidar @ p_lidar``.
+    """
+
+    name: str
+    camera: CameraModel
+    T_camera_lidar: np.ndarray = field(repr=False)
+
+
+def _ring_spec(text: str) -> tuple[str, tuple[int, int] | None]:
+    """``model`` or ``model:WxH`` -> (model, size or None)."""
+    model, _, size = text.strip().partition(":")
+    if not size:
+        return model, None
+    try:
+        width, height = (int(v) for v in size.lower().split("x"))
+    except ValueError:
+        raise ValueError(f"camera {text!r}: expected MODEL or MODEL:WxH") from None
+    if width < 16 or height < 16:
+        raise ValueError(f"camera {text!r}: the image must be at least 16 x 16")
+    return model, (width, height)
+
+
+def ring_cameras(config: RigConfig) -> list[RingCamera]:
+    """The cameras of ``config.cameras`` around the LiDAR, each with its own pose and lens.
+
+    The first camera is the rig's own (``config.camera_object()`` at ``config.T_camera_lidar``
+    or the seed's :func:`default_T_camera_lidar`; its model is the ring's first entry), so a
+    ring's first camera sees exactly what a one-camera rig of the same seed sees. Camera ``k``
+    is the first one turned about the LiDAR's z axis by ``k / n`` of a full turn around a
+    spinning LiDAR (the side and rear cameras of a car), or spread over +-20 degrees in front
+    of a rosette LiDAR (whose field of view is about 70 degrees), then moved by up to 5 cm and
+    turned by up to 2 degrees at random: every camera has an extrinsic of its own. An entry
+    ``model:WxH`` sets its image size; by default the first has ``config.image_size`` (1280 x
+    960) and the others :data:`RING_IMAGE_SIZE`.
+    """
+    specs = [_ring_spec(text) for text in config.cameras] or [(config.camera, None)]
+    lidar = config.lidar_model()
+    if config.T_camera_lidar is not None:
+        T0 = np.array(config.T_camera_lidar, dtype=np.float64)
+    else:
+        T0 = default_T_camera_lidar(lidar.kind, config.seed)
+    T_lidar_cam0 = invert_T(T0)
+    n = len(specs)
+    out = []
+    for k, (model, size) in enumerate(specs):
+        if k == 0:
+            camera = config.camera_object() if size is None and model == config.camera else None
+            if camera is None:
+                width, height = size or config.image_size or (1280, 960)
+                camera = example_camera(model, width, height)
+            out.append(RingCamera("cam0", camera, T0))
+            continue
+        width, height = size or RING_IMAGE_SIZE
+        camera = example_camera(model, width, height)
+        rng = np.random.default_rng([config.seed, 0x5109, k])
+        if lidar.kind == "rosette":
+            yaw = math.radians(-20.0 + 40.0 * k / max(n - 1, 1))
+        else:
+            yaw = 2.0 * math.pi * k / n
+        R_turn = so3_exp(np.array([0.0, 0.0, yaw]))
+        jitter = so3_exp(np.radians(rng.uniform(-2.0, 2.0, size=3)))
+        R = R_turn @ T_lidar_cam0[:3, :3] @ jitter
+        t = R_turn @ T_lidar_cam0[:3, 3] + rng.uniform(-0.05, 0.05, size=3)
+        out.append(RingCamera(f"cam{k}", camera, invert_T(make_T(R, t))))
+    return out
+
+
+def generate_ring(
+    config: RigConfig,
+    *,
+    pair: int = 0,
+    progress: Callable[[int, int, str], None] | None = None,
+) -> list[SyntheticSequence]:
+    """One pair seen by every camera of ``config.cameras`` (:func:`ring_cameras`).
+
+    One scene, trajectory and set of scans; an image per camera, each taken at time 0. The
+    first sequence is :func:`generate_sequence` of the first camera; the others share its
+    scans (the same objects) and differ in camera, image and ground truth.
+    """
+    cameras = ring_cameras(config)
+    first = cameras[0]
+    single = replace(
+        config, cameras=(), camera_model=first.camera, T_camera_lidar=first.T_camera_lidar
+    )
+    base = generate_sequence(single, pair=pair, progress=progress)
+    sequences = [base]
+    seeds = _pair_seeds(config.seed, pair)
+    for k, ring in enumerate(cameras[1:], start=1):
+        render = config.render_config or RenderConfig(color=config.color)
+        seed = int(np.random.SeedSequence([seeds["render"], k]).generate_state(1)[0])
+        render = replace(render, seed=seed, parallel=config.parallel or render.parallel)
+        render = render_without(render, config.without)
+        T_world_camera = base.trajectory.pose(0.0) @ invert_T(ring.T_camera_lidar)
+        rendered = render_image(base.scene, ring.camera, T_world_camera, render)
+        sequences.append(
+            replace(
+                base,
+                image=rendered.image,
+                camera=ring.camera,
+                T_camera_lidar=ring.T_camera_lidar,
+                rendered=rendered,
+            )
+        )
+    return sequences

@@ -11,6 +11,14 @@ Layout of ``OUT`` (``name`` = ``pair_000``, ``pair_001``, ...)::
     OUT/<name>/                     bag2 / mcap: ROS 2 bag   } camera_info, image, then scans
     OUT/ground_truth.json           written last: a run that crashed has none
 
+A camera ring (``RigConfig.cameras``, :func:`~nbcalib.synthetic.rig.generate_ring`) writes the
+scans once and an image per camera ``cam0``, ``cam1``, ...: ``OUT/<camera>/<name>.png`` and
+``OUT/<camera>/camera.yaml`` with ``OUT/<name>.pcd`` (files), or in each bag
+``/<camera>/image`` and ``/<camera>/camera_info`` (:func:`ring_topics`) and a ``/tf_static``
+from ``lidar`` to each camera's frame ``<camera>``. ``ground_truth.json`` keeps the first
+camera's extrinsic at the top (so a one-camera tool judges that camera) and every camera's
+under ``cameras``.
+
 PCD and PointCloud2 fields: ``x, y, z`` float32 (metres, LiDAR frame at the point's time),
 ``intensity`` float32 (0-255), ``t`` float32 (seconds), ``ring`` uint16. Bags hold the topics of
 :data:`TOPICS` in the frames :data:`FRAMES`; the image and the first scan share the stamp
@@ -35,8 +43,14 @@ import numpy as np
 from nbcalib.io._files import write_text_atomic
 from nbcalib.progress import Progress
 from nbcalib.synthetic.lidar import LidarScan
-from nbcalib.synthetic.rig import RigConfig, SyntheticSequence, generate_sequence
-from nbcalib.transforms import pose_to_xyz_quat
+from nbcalib.synthetic.rig import (
+    RigConfig,
+    SyntheticSequence,
+    generate_ring,
+    generate_sequence,
+    ring_cameras,
+)
+from nbcalib.transforms import invert_T, pose_to_xyz_quat
 
 __all__ = [
     "BASE_STAMP_NS",
@@ -46,6 +60,7 @@ __all__ = [
     "export_dataset",
     "ground_truth_dict",
     "pair_name",
+    "ring_topics",
     "scan_fields",
     "write_sequence_bag",
     "write_sequence_files",
@@ -90,23 +105,39 @@ def _moving(sequence: SyntheticSequence) -> bool:
     )
 
 
-def write_sequence_files(sequence: SyntheticSequence, out_dir, name: str) -> dict:
+def ring_topics(camera: str) -> dict[str, str]:
+    """The image and camera info topics of a ring's camera ``camera`` (``cam0``...)."""
+    return {"image": f"/{camera}/image", "camera_info": f"/{camera}/camera_info"}
+
+
+def write_sequence_files(
+    sequence: SyntheticSequence, out_dir, name: str, *, ring: list | None = None
+) -> dict:
     """Write one pair as a PNG and PCD files; returns the written names (relative to out_dir).
 
     The points are :meth:`~nbcalib.synthetic.rig.SyntheticSequence.output_scans`; a moving rig
-    (not motion-compensated) also gets one PCD per scan.
+    (not motion-compensated) also gets one PCD per scan. ``ring``: ``(camera name, sequence)``
+    of every camera of a ring (``sequence`` is the first's): an image per camera in its folder.
     """
     from nbcalib.io.image import write_png
     from nbcalib.io.pcd import write_pcd
 
     out_dir = Path(out_dir)
-    write_png(out_dir / f"{name}.png", sequence.image)
+    if ring is None:
+        write_png(out_dir / f"{name}.png", sequence.image)
+        images = {"image": f"{name}.png"}
+    else:
+        images = {"images": {}}
+        for camera, seq in ring:
+            (out_dir / camera).mkdir(parents=True, exist_ok=True)
+            write_png(out_dir / camera / f"{name}.png", seq.image)
+            images["images"][camera] = f"{camera}/{name}.png"
     merged = [scan_fields(scan, time_offset=scan.stamp) for scan in sequence.output_scans()]
     write_pcd(
         out_dir / f"{name}.pcd",
         {key: np.concatenate([f[key] for f in merged]) for key in merged[0]},
     )
-    written = {"image": f"{name}.png", "points": f"{name}.pcd"}
+    written = {**images, "points": f"{name}.pcd"}
     if _moving(sequence):
         folder = out_dir / f"{name}_scans"
         folder.mkdir(parents=True, exist_ok=True)
@@ -118,7 +149,9 @@ def write_sequence_files(sequence: SyntheticSequence, out_dir, name: str) -> dic
     return written
 
 
-def write_sequence_bag(sequence: SyntheticSequence, path, fmt: str, *, stamp_ns: int) -> None:
+def write_sequence_bag(
+    sequence: SyntheticSequence, path, fmt: str, *, stamp_ns: int, ring: list | None = None
+) -> None:
     """Write one pair as a ROS bag: tf_static, camera_info, the image, then every scan.
 
     The scans are :meth:`~nbcalib.synthetic.rig.SyntheticSequence.output_scans` (one
@@ -134,30 +167,45 @@ def write_sequence_bag(sequence: SyntheticSequence, path, fmt: str, *, stamp_ns:
         Bag format.
     stamp_ns : int
         Stamp of the image and of the first scan, nanoseconds.
+    ring : list of (str, SyntheticSequence), optional
+        Every camera of a ring with its sequence (``sequence`` is the first's): each camera's
+        transform, camera info and image on its own topics (:func:`ring_topics`).
     """
     from nbcalib.io.bag_writer import BagWriter
 
-    lidar, camera = FRAMES["lidar"], FRAMES["camera"]
+    lidar = FRAMES["lidar"]
+    if ring is None:
+        views = [(FRAMES["camera"], sequence, TOPICS)]
+    else:
+        views = [(camera, seq, ring_topics(camera)) for camera, seq in ring]
     with BagWriter(path, fmt) as bag:
-        bag.write_tf_static(stamp_ns, lidar, camera, sequence.T_lidar_camera)
-        bag.write_camera_info(TOPICS["camera_info"], stamp_ns, sequence.camera, camera)
-        bag.write_image(TOPICS["image"], stamp_ns, sequence.image, camera)
+        for frame, seq, _ in views:
+            bag.write_tf_static(stamp_ns, lidar, frame, seq.T_lidar_camera)
+        for frame, seq, topics in views:
+            bag.write_camera_info(topics["camera_info"], stamp_ns, seq.camera, frame)
+            bag.write_image(topics["image"], stamp_ns, seq.image, frame)
         for scan in sequence.output_scans():
             scan_stamp = stamp_ns + round(scan.stamp * 1e9)
             bag.write_pointcloud(TOPICS["points"], scan_stamp, scan_fields(scan), lidar)
 
 
-def ground_truth_dict(config: RigConfig, sequences_info: list[dict], T_camera_lidar) -> dict:
+def ground_truth_dict(
+    config: RigConfig, sequences_info: list[dict], T_camera_lidar, *, ring: list | None = None
+) -> dict:
     """The content of ``ground_truth.json``.
 
     ``T_lidar_camera`` is ``[x, y, z, qx, qy, qz, qw]`` (``p_lidar = T_lidar_camera @ p_camera``,
     the ``calib.json`` direction) and ``T_camera_lidar`` the 4 x 4 inverse; the other keys
     describe the data (rig, LiDAR, scene, seed, modality gap, the differences switched off
-    ``without``, pairs with their files and ground-truth poses).
+    ``without``, pairs with their files and ground-truth poses). A ring (``ring``: its
+    :class:`~nbcalib.synthetic.rig.RingCamera` list) adds ``cameras``: per camera its name,
+    model, size, topics, ``T_lidar_camera``, ``T_camera_lidar`` and ``T_cam0_camera`` (the
+    camera in the first camera's frame, ``[x, y, z, qx, qy, qz, qw]``), the first camera's at
+    the top as for one camera.
     """
     T_camera_lidar = np.asarray(T_camera_lidar, dtype=np.float64)
     T_lidar_camera = np.linalg.inv(T_camera_lidar)
-    return {
+    truth = {
         "T_lidar_camera": [float(v) for v in pose_to_xyz_quat(T_lidar_camera)],
         "T_camera_lidar": T_camera_lidar.tolist(),
         "lidar": config.lidar,
@@ -172,6 +220,24 @@ def ground_truth_dict(config: RigConfig, sequences_info: list[dict], T_camera_li
         "the LiDAR frame at the start of each pair's first scan (= the image time)",
         "pairs": sequences_info,
     }
+    if ring:
+        T_cam0_lidar = ring[0].T_camera_lidar
+        truth["cameras"] = [
+            {
+                "name": r.name,
+                "camera_model": r.camera.model,
+                "width": r.camera.width,
+                "height": r.camera.height,
+                "topics": ring_topics(r.name),
+                "T_lidar_camera": [float(v) for v in pose_to_xyz_quat(invert_T(r.T_camera_lidar))],
+                "T_camera_lidar": np.asarray(r.T_camera_lidar).tolist(),
+                "T_cam0_camera": [
+                    float(v) for v in pose_to_xyz_quat(T_cam0_lidar @ invert_T(r.T_camera_lidar))
+                ],
+            }
+            for r in ring
+        ]
+    return truth
 
 
 def _sequence_info(sequence: SyntheticSequence, stamp_ns: int, written: dict) -> dict:
@@ -248,7 +314,11 @@ def export_dataset(
 
         infos, T_camera_lidar, camera = _export_pairs(config, out_dir, pairs, fmt, report)
     save_camera(out_dir / "camera.yaml", camera)
-    truth = ground_truth_dict(config, infos, T_camera_lidar)
+    ring = ring_cameras(config) if config.cameras else None
+    for r in ring or ():
+        (out_dir / r.name).mkdir(parents=True, exist_ok=True)
+        save_camera(out_dir / r.name / "camera.yaml", r.camera)
+    truth = ground_truth_dict(config, infos, T_camera_lidar, ring=ring)
     write_text_atomic(truth_path, json.dumps(truth, indent=2, sort_keys=True) + "\n")
     return truth
 
@@ -267,15 +337,21 @@ def _export_pairs(config: RigConfig, out_dir: Path, pairs: int, fmt: str, report
                 pair * (total + 1) + done, pairs * (total + 1), f"pair {pair + 1}/{pairs}: {what}"
             )
 
-        sequence = generate_sequence(config, pair=pair, progress=step)
+        ring = None
+        if config.cameras:
+            sequences = generate_ring(config, pair=pair, progress=step)
+            sequence = sequences[0]
+            ring = [(f"cam{k}", seq) for k, seq in enumerate(sequences)]
+        else:
+            sequence = generate_sequence(config, pair=pair, progress=step)
         name = pair_name(pair)
         stamp_ns = BASE_STAMP_NS + pair * 1000 * 1_000_000_000
         if fmt == "files":
-            written = write_sequence_files(sequence, out_dir, name)
+            written = write_sequence_files(sequence, out_dir, name, ring=ring)
         else:
             bag_name = f"{name}.bag" if fmt == "bag1" else name
             _remove(out_dir / bag_name)
-            write_sequence_bag(sequence, out_dir / bag_name, fmt, stamp_ns=stamp_ns)
+            write_sequence_bag(sequence, out_dir / bag_name, fmt, stamp_ns=stamp_ns, ring=ring)
             written = {"bag": bag_name}
         infos.append(_sequence_info(sequence, stamp_ns, written))
         T_camera_lidar = sequence.T_camera_lidar

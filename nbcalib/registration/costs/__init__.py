@@ -42,7 +42,7 @@ if TYPE_CHECKING:  # this module is imported by the settings, which must not loa
     from nbcalib.registration.config import RefineConfig
     from nbcalib.registration.nid import MultiNIDCost
 
-__all__ = ["COSTS", "PairView", "build_cost", "pair_view", "point_budget"]
+__all__ = ["COSTS", "PairView", "RigTerm", "build_cost", "pair_view", "point_budget"]
 
 #: The intensity terms by name (:attr:`RefineConfig.cost
 #: <nbcalib.registration.config.RefineConfig>`), each a module of this package whose
@@ -153,6 +153,62 @@ def pair_view(
     )
 
 
+def se3_adjoint(T) -> np.ndarray:
+    """``Ad_T`` (6 x 6) for ``delta = [v, omega]``: ``T exp(delta) T^-1 = exp(Ad_T delta)``."""
+    from nbcalib.transforms import hat
+
+    R, t = np.asarray(T[:3, :3], dtype=np.float64), np.asarray(T[:3, 3], dtype=np.float64)
+    Ad = np.zeros((6, 6))
+    Ad[:3, :3] = R
+    Ad[:3, 3:] = hat(t) @ R
+    Ad[3:, 3:] = R
+    return Ad
+
+
+class RigTerm:
+    """A term of a pair whose camera is another camera of a rig, as a function of the rig's pose.
+
+    The optimised pose is the rig's reference camera's ``T_ref_lidar``; this pair's camera sees
+    the cloud at ``T_camera_ref @ T_ref_lidar``. The gradient with respect to a left
+    perturbation of ``T_ref_lidar`` is the term's own through the adjoint:
+    ``T_camera_ref exp(d) = exp(Ad d) T_camera_ref``, so ``d/dd = Ad^T g``.
+    """
+
+    def __init__(self, term, T_camera_ref):
+        self.term = term
+        self.T_camera_ref = np.asarray(T_camera_ref, dtype=np.float64)
+        self._adjoint_T = se3_adjoint(self.T_camera_ref).T
+
+    def evaluate(self, T_camera_lidar, *, grad: bool = False):
+        """The term at the pair camera's pose (and the gradient in the reference camera's)."""
+        from nbcalib.registration.nid import NIDEvaluation
+
+        ev = self.term.evaluate(self.T_camera_ref @ T_camera_lidar, grad=grad)
+        g = None if ev.grad is None else self._adjoint_T @ ev.grad
+        return NIDEvaluation(ev.value, g, ev.n_in_image)
+
+    def value(self, T_camera_lidar) -> float:
+        """The term's value."""
+        return self.evaluate(T_camera_lidar).value
+
+    def value_and_grad(self, T_camera_lidar) -> tuple[float, np.ndarray]:
+        """The term's value and gradient."""
+        ev = self.evaluate(T_camera_lidar, grad=True)
+        return ev.value, ev.grad
+
+    def __len__(self) -> int:
+        return len(self.term)
+
+    @property
+    def parallel(self):
+        """The term's own setting."""
+        return self.term.parallel
+
+    @parallel.setter
+    def parallel(self, value) -> None:
+        self.term.parallel = value
+
+
 def build_cost(
     pairs: Sequence,
     T_camera_lidar,
@@ -167,7 +223,9 @@ def build_cost(
     ``n_pairs``: the pairs of the whole job, when ``pairs`` are some of them (default: their
     number), for each pair's share of ``job_points`` (:func:`point_budget`).
     Each pair adds its intensity term (:attr:`RefineConfig.cost`, weight 1) and, when
-    ``structure_weight > 0``, its structure term times that weight.
+    ``structure_weight > 0``, its structure term times that weight. A pair of another camera of
+    a rig (``pair.T_camera_rig`` set) is looked at from ``T_camera_rig @ T_camera_lidar``, its
+    terms as functions of ``T_camera_lidar`` (:class:`RigTerm`).
 
     Returns
     -------
@@ -183,10 +241,14 @@ def build_cost(
     n_pairs = n_pairs or len(pairs)
 
     def pair_terms(pair):  # one pair's z-buffer, subset and terms: independent of the others
-        view = pair_view(pair, T_camera_lidar, config, level=level, n_pairs=n_pairs)
+        offset = getattr(pair, "T_camera_rig", None)
+        T = T_camera_lidar if offset is None else offset @ np.asarray(T_camera_lidar)
+        view = pair_view(pair, T, config, level=level, n_pairs=n_pairs)
         terms = intensity(view, config)
         if config.structure_weight > 0 and view.keep.size:
             terms += [(t, w * config.structure_weight) for t, w in structure.terms(view, config)]
+        if offset is not None:
+            terms = [(RigTerm(t, offset), w) for t, w in terms]
         return view.n_visible, terms
 
     costs, weights, counts = [], [], []
