@@ -5,6 +5,13 @@
 >>> result.T_lidar_camera            # p_lidar = T_lidar_camera @ p_camera  # doctest: +SKIP
 >>> result.pairs[0].lidar_image      # the intermediate products            # doctest: +SKIP
 
+Several cameras around one LiDAR: images and cameras by camera name (and, when the
+camera-to-camera extrinsics are known, the rig):
+
+>>> rig = nbcalib.calibrate(points, None, {"front": img0, "left": img1},           # doctest: +SKIP
+...                         {"front": "front.yaml", "left": "left.yaml"})
+>>> rig.cameras["left"].T_lidar_camera, rig.T_ref_camera["left"]                   # doctest: +SKIP
+
 A thin shell over :class:`nbcalib.pipeline.Calibrator`, the pipeline ``nbcalib run`` runs: the
 same stages in the same order, in memory (or in ``workdir`` when given, which the command line
 can then continue).
@@ -166,6 +173,7 @@ def calibrate(
     camera,
     *,
     T_init=None,
+    rig=None,
     workdir: str | os.PathLike | None = None,
     config=None,
     model_dir: str | os.PathLike | None = None,
@@ -185,14 +193,19 @@ def calibrate(
         LiDAR intensities, any scale (rank-equalised here); None when ``points`` is a file or
         has intensity as its fourth column.
     image : ndarray of shape (H, W) or (H, W, 3), uint8 or float in [0, 1], or str, or a list
-        The camera image (or its file).
-    camera : CameraModel or str
+        The camera image (or its file). Several cameras: a dict ``{camera name: image (or a
+        list, one per cloud)}``, with ``camera`` a dict of the same names.
+    camera : CameraModel or str, or a dict of them
         The camera, or a camera file (ROS camera_info YAML, OpenCV/nbcalib YAML/JSON,
-        ``calib.json``).
+        ``calib.json``); by camera name for several cameras.
     T_init : array_like of shape (4, 4), or Start, optional
         Start of fine registration, ``p_camera = T_init @ p_lidar``, or a
         :class:`~nbcalib.products.Start` (a pose by its seven ``calib.json`` numbers, as
         ``--init`` takes it); default: the automatic guess from keypoint matches.
+    rig : Rig or str or os.PathLike, optional
+        Several cameras only: their known camera-to-camera extrinsics
+        (:class:`nbcalib.io.rig.Rig`, or a Kalibr camchain or nbcalib rig file), named as the
+        cameras: one rig pose from every camera (:mod:`nbcalib.rig_pipeline`).
     workdir : str or os.PathLike, optional
         Keep the work directory here (``calib.json`` gets the results); default: in memory.
     config : CalibrationConfig, optional
@@ -217,6 +230,8 @@ def calibrate(
     Returns
     -------
     CalibrationResult
+        Or, for several cameras, a :class:`nbcalib.rig_pipeline.RigResult` (each camera's
+        result, the camera-to-camera transforms).
 
     Raises
     ------
@@ -238,6 +253,22 @@ def calibrate(
             "sections, or pass config=CalibrationConfig(...)"
         )
     config = set_values(config or CalibrationConfig(), {known[k]: v for k, v in settings.items()})
+    if isinstance(image, dict) or isinstance(camera, dict):
+        return _calibrate_cameras(
+            points,
+            intensities,
+            image,
+            camera,
+            config,
+            rig,
+            T_init,
+            workdir,
+            model_dir,
+            progress,
+            log,
+        )
+    if rig is not None:
+        raise ValueError("rig is for several cameras: give image and camera by camera name")
     clouds = _as_list(points, "points")
     values = _as_list(intensities, "intensities") if intensities is not None else [None]
     images = _as_list(image, "image")
@@ -255,3 +286,41 @@ def calibrate(
     with api_output(progress, log):
         compiling_note()
         return calibrator.run(ArrayInputs(clouds, values, images, camera), init=start)
+
+
+def _calibrate_cameras(
+    points, intensities, images, cameras, config, rig, T_init, workdir, model_dir, progress, log
+):
+    """Several cameras (images and cameras by name): :class:`nbcalib.rig_pipeline.RigCalibrator`."""
+    from nbcalib.rig_pipeline import CameraSource, RigCalibrator
+
+    if not (isinstance(images, dict) and isinstance(cameras, dict)):
+        raise ValueError("several cameras: give both image and camera as {camera name: ...}")
+    if set(images) != set(cameras) or not images:
+        raise ValueError(
+            f"image and camera must name the same cameras: {sorted(images)} vs {sorted(cameras)}"
+        )
+    if T_init is not None:
+        raise ValueError("T_init is for one camera; several cameras find their starts by matching")
+    if rig is not None and not hasattr(rig, "cameras"):
+        from nbcalib.io.rig import read_rig
+
+        rig = read_rig(rig)
+    clouds = _as_list(points, "points")
+    values = _as_list(intensities, "intensities") if intensities is not None else [None]
+    if len(values) == 1 and len(clouds) > 1 and values[0] is None:
+        values = values * len(clouds)
+    inputs = {}
+    for name in images:
+        shots = _as_list(images[name], f"image {name!r}")
+        if not len(clouds) == len(values) == len(shots):
+            raise ValueError(
+                f"camera {name!r}: one image and one intensity array per cloud: got "
+                f"{len(clouds)} clouds, {len(values)} intensity arrays, {len(shots)} images"
+            )
+        inputs[name] = ArrayInputs(clouds, values, shots, cameras[name])
+    sources = [CameraSource(name, "") for name in images]
+    job = RigCalibrator(config, workdir=workdir, model_dir=model_dir, rig=rig)
+    with api_output(progress, log):
+        compiling_note()
+        return job.run(inputs, sources)

@@ -494,6 +494,7 @@ class Calibrator:
         ``start``, which the report judges the move from); the report is then made as for a
         result of this job's own.
         """
+        self._stage_t0 = time.perf_counter()
         T = np.asarray(T_camera_lidar, dtype=np.float64)
         self._adopted = (as_stored_values(T), source)
         self.refinement = None

@@ -41,11 +41,12 @@ import contextlib
 import logging
 import shutil
 import sys
+import threading
 import time
 from collections.abc import Callable, Iterator
 from typing import TextIO
 
-__all__ = ["Progress", "api_output", "in_jupyter"]
+__all__ = ["Progress", "api_output", "in_jupyter", "lines_only"]
 
 log = logging.getLogger("nbcalib.progress")
 
@@ -56,6 +57,23 @@ NOTEBOOK_REFRESH = 0.5
 #: Seconds between two step lines in a log, and the shortest display that writes any.
 LINE_INTERVAL = 5.0
 _BAR_WIDTH = 20
+
+_local = threading.local()
+
+
+@contextlib.contextmanager
+def lines_only() -> Iterator[None]:
+    """Displays made in this thread meanwhile write step lines, never a bar.
+
+    For work that runs beside other work in threads (the cameras of a rig,
+    :mod:`nbcalib.rig_pipeline`): two bars redrawn in one place would overwrite each other.
+    """
+    before = getattr(_local, "lines_only", False)
+    _local.lines_only = True
+    try:
+        yield
+    finally:
+        _local.lines_only = before
 
 
 class Progress:
@@ -106,6 +124,8 @@ class Progress:
         self.what = ""
         if not enabled or not log.isEnabledFor(logging.INFO):
             self.mode = "off"
+        elif getattr(_local, "lines_only", False):
+            self.mode = "lines"
         elif _isatty(self.stream):
             self.mode = "bar"
         elif in_jupyter():

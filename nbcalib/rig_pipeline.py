@@ -29,9 +29,11 @@ Example
 
 from __future__ import annotations
 
+import contextlib
 import json
 import logging
 import re
+import threading
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
@@ -42,7 +44,13 @@ import numpy as np
 from nbcalib.config import CalibrationConfig
 from nbcalib.errors import InputError
 from nbcalib.preprocess.config import PreprocessConfig
-from nbcalib.preprocess.inputs import InputSpec, PairInput, bag_name, classify_inputs
+from nbcalib.preprocess.inputs import (
+    InputSpec,
+    PairInput,
+    SharedClouds,
+    bag_name,
+    classify_inputs,
+)
 from nbcalib.products import Start
 from nbcalib.transforms import invert_T, pose_error, pose_from_xyz_quat, pose_to_xyz_quat
 
@@ -52,6 +60,17 @@ log = logging.getLogger("nbcalib.pipeline")
 
 #: The job's record at the top of a several-camera work directory.
 RIG_JOB = "rig.json"
+
+#: Cameras whose stages run at once. Each stage keeps about 1.7 of 2 cores busy (a one-camera
+#: run: 86 s CPU in 50 s); two cameras side by side fill the gaps: two one-camera runs took
+#: 84.9 s at once against 96.7 s one after the other, with the same results
+#: (docs/BENCHMARKS.md, several cameras).
+CAMERA_WORKERS = 2
+
+#: How far (degrees) a camera's own guess, taken through the given rig, may put the rig from
+#: the start before the rig is doubted: guesses are good to a few tenths of a degree, a wrong
+#: rig file (other cameras, another order) is off by tens of degrees.
+RIG_START_TOLERANCE_DEG = 2.0
 
 
 @dataclass(frozen=True)
@@ -143,11 +162,13 @@ class _Recording:
         self._pairs: dict[str, list[PairInput]] | None = None
         self._camera: dict[str, object] = {}
         self._data_path = ""
+        self._lock = threading.Lock()  # cameras preprocess at once: the first one reads
 
     def gather(self, name: str, config: PreprocessConfig):
         """(pairs, camera, data path) of camera ``name``, as :meth:`InputSpec.gather`."""
-        if self._pairs is None:
-            self._read(config)
+        with self._lock:
+            if self._pairs is None:
+                self._read(config)
         camera = self._camera.get(name)
         if camera is None:
             raise InputError(
@@ -173,7 +194,7 @@ class _Recording:
                         break
                 if not scans:
                     raise InputError(f"point cloud topic {points_topic} has no messages", path)
-                clouds: dict = {}  # one dense cloud per pair, for every camera
+                clouds = SharedClouds()  # one dense cloud per pair, for every camera
                 for source in self.cameras:
                     frames = bag.images(source.image_topic, grey=True)
                     image = next((img for _, img in frames), None)
@@ -278,11 +299,16 @@ class RigCalibrator:
         self.model_dir = model_dir
         self.rig = rig
         self.rig_file = None if rig_file is None else str(rig_file)
+        #: ``WORK/report/index.html`` once written.
+        self.report: Path | None = None
         self.calibrators: dict = {}
+        #: With a rig: ``{camera: (metres, degrees)}``, how far each camera's own guess puts
+        #: the rig from the start through the rig (the start's camera left out).
+        self.start_disagreement: dict = {}
 
     def run(
         self,
-        spec: InputSpec,
+        spec,
         cameras: Sequence[CameraSource],
         *,
         until: str | None = None,
@@ -291,7 +317,11 @@ class RigCalibrator:
         accept_failed_guess: bool = False,
         skip: dict[str, str] | None = None,
     ) -> RigResult:
-        """Each camera's job, then (with a rig) the joint pose; writes ``WORK/rig.json``."""
+        """Each camera's job, then (with a rig) the joint pose; writes ``WORK/rig.json``.
+
+        ``spec``: the recording (:class:`InputSpec`, its bags read once for every camera), or
+        each camera's inputs by name (``{name: ArrayInputs}``, :func:`nbcalib.calibrate`).
+        """
         from nbcalib.pipeline import Calibrator
         from nbcalib.workdir import check_writable
 
@@ -300,22 +330,27 @@ class RigCalibrator:
         self._check_rig(cameras)
         if self.workdir is not None:
             check_writable(self.workdir)
-        recording = _Recording(spec, cameras, self.rig)
         joint = self.rig is not None and until in (None, "calibrate", "report")
-        self._inputs = {c.name: _CameraInputs(spec, c.name, recording) for c in cameras}
-        for k, source in enumerate(cameras):
-            log.info("camera %d/%d: %s (%s)", k + 1, len(cameras), source.name, source.image_topic)
-            pre = replace(
-                self.config.preprocess,
-                image_topic=source.image_topic,
-                camera_info_topic=source.camera_info_topic,
-            )
+        if isinstance(spec, InputSpec):
+            recording = _Recording(spec, cameras, self.rig)
+            self._inputs = {c.name: _CameraInputs(spec, c.name, recording) for c in cameras}
+        else:
+            self._inputs = dict(spec)
+        for source in cameras:
+            pre = self.config.preprocess
+            if source.image_topic:
+                pre = replace(
+                    pre, image_topic=source.image_topic, camera_info_topic=source.camera_info_topic
+                )
             work = None if self.workdir is None else self.workdir / source.name
-            calibrator = Calibrator(
+            self.calibrators[source.name] = Calibrator(
                 replace(self.config, preprocess=pre), workdir=work, model_dir=self.model_dir
             )
-            self.calibrators[source.name] = calibrator
-            calibrator.run(
+        names = ", ".join(f"{c.name} ({c.image_topic or 'arrays'})" for c in cameras)
+        log.info("%d cameras: %s", len(cameras), names)
+
+        def own_job(source):
+            self.calibrators[source.name].run(
                 self._inputs[source.name],
                 until="initial-guess" if joint else until,
                 redo_from=redo_from,
@@ -323,13 +358,39 @@ class RigCalibrator:
                 accept_failed_guess=accept_failed_guess,
                 skip=skip,
             )
+
+        self._each(cameras, own_job)
         if joint:
             self._joint(cameras, until=until, skip=skip)
         result = self._result(cameras, joint)
         result.seconds = round(time.perf_counter() - t0, 3)
         if self.workdir is not None:
-            self._write(spec, cameras, result)
+            job = self._write(spec, cameras, result)
+            if until in (None, "report") and "report" not in (skip or {}):
+                from nbcalib.report.rig import write_rig_report
+
+                self.report = write_rig_report(self.workdir, job)
         return result
+
+    def _each(self, cameras, job) -> None:
+        """``job(camera)`` for each camera, :data:`CAMERA_WORKERS` at a time.
+
+        Each camera's log lines start with its name and its progress shows as step lines;
+        an error names the camera. Results are those of one camera after another: the cameras
+        share no state but the recording, read once under a lock.
+        """
+        from nbcalib._threads import thread_map
+        from nbcalib.progress import lines_only
+
+        def run(source):
+            with _camera_lines(source.name), lines_only():
+                try:
+                    job(source)
+                except InputError as exc:
+                    raise InputError(f"camera {source.name}: {exc}") from None
+
+        with _camera_log_prefix():
+            thread_map(run, cameras, workers=CAMERA_WORKERS)
 
     # ------------------------------------------------------------------ the rig
     def _check_rig(self, cameras: Sequence[CameraSource]) -> None:
@@ -366,9 +427,10 @@ class RigCalibrator:
                 starts[source.name] = start
         if not starts:
             raise InputError("no camera has an initial guess: the rig has no start")
-        name = self._best_start(starts)
+        name = min(starts, key=lambda n: self._guess_bound(n, starts[n]))
         T_start = invert_T(self.T_camera_ref(name, ref)) @ starts[name].T_camera_lidar
         start = Start.from_matrix(T_start, f"rig start ({name}'s {starts[name].source})")
+        self._check_starts(starts, name, T_start, ref)
         log.info("rig: one pose from %d cameras, starting from %s's guess", len(cameras), name)
         reference = self.calibrators[ref]
         extra = []
@@ -383,22 +445,65 @@ class RigCalibrator:
         if reference.refinement is None:
             return
         T_ref = reference._result_pose()
-        for source in cameras[1:]:
+
+        def follow(source):  # the rig's pose through the rig, and the camera's own report
             calibrator = self.calibrators[source.name]
-            own = starts.get(source.name)
-            T = self.T_camera_ref(source.name, ref) @ T_ref
             calibrator.adopt_result(
-                T,
+                self.T_camera_ref(source.name, ref) @ T_ref,
                 f"rig ({ref}'s joint registration)",
-                start=own,
+                start=starts.get(source.name),
                 converged=reference.refinement.converged,
             )
             calibrator.run(self._inputs[source.name], until=until, skip=skip)
 
-    @staticmethod
-    def _best_start(starts: dict) -> str:
-        """The camera whose guess is tightest (its stated rotation bound), else the first."""
-        return next(iter(starts))
+        self._each(cameras[1:], follow)
+
+    def _check_starts(self, starts: dict, chosen: str, T_start, ref: str) -> None:
+        """Each camera's own guess through the rig against the rig's start: a rig that fits.
+
+        Logs how far each other guess puts the rig; warns for one beyond
+        :data:`RIG_START_TOLERANCE_DEG`, and refuses the rig when every other camera's is.
+        """
+        self.start_disagreement = {}
+        far = []
+        for name, start in starts.items():
+            if name == chosen:
+                continue
+            T = invert_T(self.T_camera_ref(name, ref)) @ start.T_camera_lidar
+            dt, dr = pose_error(invert_T(T), invert_T(T_start))
+            self.start_disagreement[name] = (float(dt), float(dr))
+            log.info(
+                "    rig: %s's own guess puts the rig %.2f cm, %.3f deg from %s's", name,
+                100 * dt, dr, chosen,
+            )  # fmt: skip
+            if dr > RIG_START_TOLERANCE_DEG:
+                far.append(f"{name} {dr:.1f} deg")
+                log.warning(
+                    "%s's own guess puts the rig %.1f deg from %s's through --rig: the rig file "
+                    "may not fit these cameras (other cameras, another order?)", name, dr, chosen,
+                )  # fmt: skip
+        if far and len(far) == len(starts) - 1:
+            raise InputError(
+                f"the rig does not fit the cameras: through it every other camera's own guess "
+                f"puts the rig far from {chosen}'s ({', '.join(far)}); check the rig file's "
+                "cameras and their order, or calibrate without --rig to see the transforms the "
+                "data imply"
+            )
+
+    def _guess_bound(self, name: str, start: Start) -> float:
+        """The rotation bound of camera ``name``'s guess, degrees (inf: not known).
+
+        The rig starts from the camera whose guess is tightest (ties: the first camera).
+        """
+        calibrator = self.calibrators[name]
+        guess = calibrator.guess
+        if guess is not None and np.isfinite(guess.bound_deg):
+            return float(guess.bound_deg)
+        calib = calibrator._calib()
+        record = None if calib is None else calib.record.initial_guess
+        figures = None if record is None else record.stages.get(start.source)
+        bound = None if figures is None else figures.bound_deg
+        return float("inf") if bound is None else float(bound)
 
     def _result(self, cameras, joint: bool) -> RigResult:
         ref = cameras[0].name
@@ -408,7 +513,8 @@ class RigCalibrator:
         for source in cameras:
             result = results[source.name]
             if joint:
-                out.T_ref_camera[source.name] = invert_T(self.T_camera_ref(source.name, ref))
+                T = self.T_camera_ref(source.name, ref)
+                out.T_ref_camera[source.name] = np.eye(4) if source.name == ref else invert_T(T)
             elif result is not None and T_ref is not None:
                 out.T_ref_camera[source.name] = T_ref @ invert_T(result.T_camera_lidar)
                 if self.rig is not None:
@@ -417,7 +523,7 @@ class RigCalibrator:
         return out
 
     # ------------------------------------------------------------------ record
-    def _write(self, spec: InputSpec, cameras, result: RigResult) -> None:
+    def _write(self, spec: InputSpec, cameras, result: RigResult) -> dict:
         from nbcalib.io._files import write_text_atomic
 
         doc = {
@@ -443,10 +549,47 @@ class RigCalibrator:
                 name: {"translation_m": float(dt), "rotation_deg": float(dr)}
                 for name, (dt, dr) in result.rig_errors.items()
             },
-            "inputs": spec.to_dict(),
+            "start_disagreement": {
+                name: {"translation_m": dt, "rotation_deg": dr}
+                for name, (dt, dr) in self.start_disagreement.items()
+            },
+            "inputs": spec.to_dict() if isinstance(spec, InputSpec) else None,
             "seconds": result.seconds,
         }
         write_text_atomic(self.workdir / RIG_JOB, json.dumps(doc, indent=2) + "\n")
+        return doc
+
+
+_camera = threading.local()
+
+
+@contextlib.contextmanager
+def _camera_lines(name: str):
+    """Log lines of this thread meanwhile start with ``name: ``."""
+    _camera.name = name
+    try:
+        yield
+    finally:
+        _camera.name = None
+
+
+@contextlib.contextmanager
+def _camera_log_prefix():
+    """While several cameras run at once, prefix each nbcalib log line with its camera's name."""
+    previous = logging.getLogRecordFactory()
+
+    def factory(*args, **kwargs):
+        record = previous(*args, **kwargs)
+        name = getattr(_camera, "name", None)
+        if name and record.name.startswith("nbcalib"):
+            record.msg = f"{name}: {record.msg}"
+        return record
+
+    logging.setLogRecordFactory(factory)
+    try:
+        yield
+    finally:
+        logging.setLogRecordFactory(previous)
 
 
 def _values(T) -> list[float]:

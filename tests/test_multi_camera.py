@@ -190,25 +190,31 @@ def test_a_ring_run_refuses_one_camera_options(ring_bag, tmp_path, capsys):
     assert "--init is for one camera" in capsys.readouterr().err
 
 
-def test_evaluate_prints_the_rig_then_each_camera(tmp_path, capsys):
+def _rig_workdir(path):
+    """A finished two-camera work directory: cam0 1 cm off its truth, cam1 3 cm."""
     from nbcalib.transforms import pose_to_xyz_quat
     from nbcalib.workdir import make_calib
 
     truth = {"cameras": []}
-    job = {"cameras": []}
+    job = {"cameras": [], "reference": "cam0", "joint": False}
     for k, offset in enumerate((0.01, 0.03)):
         T_true = se3_exp(np.array([0.1 * k, 0.0, 0.0, 0.0, 0.0, 0.3 * k]))
         values = [float(v) for v in pose_to_xyz_quat(invert_T(T_true))]
         truth["cameras"].append({"name": f"cam{k}", "T_lidar_camera": values})
-        calib = make_calib(example_camera("pinhole", 160, 120), ["pair_000"])
+        calib = make_calib(example_camera("fisheye" if k else "pinhole", 160, 120), ["pair_000"])
         calib.set_T_camera_lidar(
             "T_lidar_camera", se3_exp(np.array([offset, 0, 0, 0, 0, 0])) @ T_true
         )
-        (tmp_path / f"cam{k}").mkdir()
-        (tmp_path / f"cam{k}" / "calib.json").write_text(json.dumps(calib.to_dict()))
-        job["cameras"].append({"name": f"cam{k}"})
-    (tmp_path / "rig.json").write_text(json.dumps(job))
-    (tmp_path / "gt.json").write_text(json.dumps(truth))
+        (path / f"cam{k}").mkdir()
+        (path / f"cam{k}" / "calib.json").write_text(json.dumps(calib.to_dict()))
+        job["cameras"].append({"name": f"cam{k}", "image_topic": f"/cam{k}/image"})
+    (path / "rig.json").write_text(json.dumps(job))
+    (path / "gt.json").write_text(json.dumps(truth))
+    return job
+
+
+def test_evaluate_prints_the_rig_then_each_camera(tmp_path, capsys):
+    _rig_workdir(tmp_path)
     assert main(["evaluate", str(tmp_path), "--ground-truth", str(tmp_path / "gt.json")]) == 0
     lines = [json.loads(x) for x in capsys.readouterr().out.splitlines()]
     assert [x.get("camera") for x in lines] == [None, "cam0", "cam1"]
@@ -216,3 +222,40 @@ def test_evaluate_prints_the_rig_then_each_camera(tmp_path, capsys):
     assert lines[1]["translation_error_m"] == pytest.approx(0.01, abs=1e-6)
     assert lines[2]["translation_error_m"] == pytest.approx(0.03, abs=1e-6)
     assert lines[0]["worst_translation_error_m"] == pytest.approx(0.03, abs=1e-6)
+
+
+def test_export_writes_every_camera_in_one_tree(tmp_path, capsys):
+    import xml.etree.ElementTree as ET
+
+    from nbcalib.io.calib_json import read_calib_json
+    from nbcalib.io.camera_file import load_camera
+
+    _rig_workdir(tmp_path)
+    assert main(["export", str(tmp_path), "--parent-frame", "velodyne"]) == 0
+    out = tmp_path / "export"
+    robot = ET.parse(out / "lidar_cameras.urdf").getroot()
+    joints = {j.get("name"): j for j in robot.findall("joint")}
+    assert sorted(joints) == ["velodyne_to_cam0", "velodyne_to_cam1"]
+    script = (out / "tf2_static_transforms.sh").read_text()
+    assert script.count("static_transform_publisher --x") == 2 and "--child-frame-id cam1" in script
+    compile((out / "static_transforms.launch.py").read_text(), "launch", "exec")
+    for name in ("cam0", "cam1"):
+        calib = read_calib_json(tmp_path / name / "calib.json")
+        camera = load_camera(out / name / "camera_lidar_opencv.yaml")
+        point = np.array([[0.3, -0.2, 2.0]])
+        np.testing.assert_allclose(
+            camera.project(point)[0], calib.camera_model().project(point)[0], atol=1e-9
+        )
+    assert "exported 2 cameras (cam0, cam1)" in capsys.readouterr().out
+    assert main(["export", str(tmp_path), "--child-frame", "front"]) == 2
+
+
+def test_the_rig_report_has_a_section_per_camera_and_the_rig(tmp_path):
+    from nbcalib.report.rig import write_rig_report
+
+    job = _rig_workdir(tmp_path)
+    job["cameras"][1]["T_ref_camera"] = [0.1, 0, 0, 0, 0, 0, 1]
+    page = write_rig_report(tmp_path, job).read_text()
+    for text in ("Camera cam0", "Camera cam1", "The rig", "T_cam0_camera", "/cam1/image"):
+        assert text in page
+    assert "No report yet" in page  # the fake cameras have results but no report

@@ -17,13 +17,18 @@ Export the LiDAR-camera extrinsic of WORKDIR/calib.json for other tools. The ROS
 the camera OPTICAL frame (x right, y down, z forward) as the child of the LiDAR frame, i.e.
 T_lidar_camera (p_lidar = T_lidar_camera p_camera) exactly as calib.json stores it. The OpenCV
 YAML holds K, D, the image size and the other direction, T_camera_lidar with R, t and rvec, as
-cv2.projectPoints wants it."""
+cv2.projectPoints wants it.
+
+A several-camera work directory (WORKDIR/rig.json) exports every camera in one tree: one tf2
+script and launch file with a publisher per camera (each child frame named after its camera),
+one URDF with a joint per camera, and WORKDIR/export/<camera>/camera_lidar_opencv.yaml."""
 
 EPILOG = """\
 examples:
   nbcalib export work --format all                       # every format into work/export/
   nbcalib export work --format tf2 --parent-frame velodyne --child-frame camera_optical
   nbcalib export work --format opencv --out calib_out --stage auto
+  nbcalib export ring_work                               # several cameras: one tree
 """
 
 
@@ -69,9 +74,13 @@ def add_parser(subparsers, formatter_class=argparse.HelpFormatter) -> argparse.A
 def run(args: argparse.Namespace) -> int:
     """Write the export files and list them; returns 0."""
     from nbcalib.io.extrinsic_formats import FORMATS, export_result, load_result, tf2_arguments
+    from nbcalib.rig_pipeline import read_rig_job
     from nbcalib.transforms import pose_from_xyz_quat
 
     formats = FORMATS if args.fmt == "all" else (args.fmt,)
+    job = None if (Path(args.workdir) / "calib.json").is_file() else read_rig_job(args.workdir)
+    if job is not None:
+        return _export_rig(args, job, formats)
     written = export_result(
         args.workdir,
         formats,
@@ -90,4 +99,24 @@ def run(args: argparse.Namespace) -> int:
             T_lidar_camera, parent_frame=args.parent_frame, child_frame=args.child_frame
         )
         print("\nROS 2: ros2 run tf2_ros static_transform_publisher " + " ".join(ros2))
+    return 0
+
+
+def _export_rig(args, job: dict, formats) -> int:
+    """Every camera of a several-camera work directory in one tree."""
+    from nbcalib.errors import InputError
+    from nbcalib.io.extrinsic_formats import export_rig
+
+    if args.child_frame != "camera":
+        raise InputError(
+            "--child-frame names one camera; a several-camera job names each camera's frame "
+            "after the camera"
+        )
+    names = [c["name"] for c in job["cameras"]]
+    written = export_rig(
+        args.workdir, names, formats, args.out, stage=args.stage, parent_frame=args.parent_frame
+    )
+    print(f"exported {len(names)} cameras ({', '.join(names)}) of {args.workdir}:")
+    for path in written:
+        print(f"  {path}")
     return 0

@@ -316,6 +316,8 @@ def _rig_summary(job, result) -> None:
         error = result.rig_errors.get(name)
         off = "" if error is None else f"  ({100 * error[0]:.2f} cm, {error[1]:.3f} deg from --rig)"
         print(f"  {name}: [{values}]{off}")
+    if job.report is not None:
+        print(f"report: {job.report}")
     print(f"nbcalib run: {len(result.cameras)} cameras in {result.seconds:.1f} s; "
           f"job in {job.workdir / 'rig.json'}")  # fmt: skip
 

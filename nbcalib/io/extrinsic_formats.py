@@ -19,6 +19,11 @@ user (default ``lidar`` and ``camera``).
   ``rvec``. :func:`nbcalib.io.camera_file.load_camera` reads the camera back.
 
 :func:`export_result` writes the files; ``nbcalib export`` is its command line.
+
+A several-camera work directory (``WORK/rig.json``, :mod:`nbcalib.rig_pipeline`) exports every
+camera in one tree (:func:`export_rig`): one tf2 script and one launch file publishing each
+camera's optical frame (named after the camera) as a child of the LiDAR frame, one URDF with a
+fixed joint per camera, and each camera's OpenCV YAML in ``export/<camera>/``.
 """
 
 from __future__ import annotations
@@ -478,3 +483,166 @@ def _check_frames(parent_frame: str, child_frame: str) -> None:
             )
     if parent_frame.lstrip("/") == child_frame.lstrip("/"):
         raise InputError(f"parent and child frame are the same: {parent_frame!r}")
+
+
+# ---------------------------------------------------------------------- several cameras
+#: File names written by :func:`export_rig`, per format (the OpenCV one in a folder per camera).
+RIG_FILE_NAMES = {
+    "tf2": ("tf2_static_transforms.sh", "static_transforms.launch.py"),
+    "urdf": ("lidar_cameras.urdf",),
+    "opencv": ("<camera>/camera_lidar_opencv.yaml",),
+}
+
+
+def rig_tf2_text(children, *, parent_frame: str = "lidar", stage: str = "T_lidar_camera") -> str:
+    """A shell file starting one ROS 2 static transform publisher per camera.
+
+    ``children``: ``(camera optical frame name, T_lidar_camera)`` per camera.
+    """
+    convention = _TF2_CONVENTION.format(
+        parent=parent_frame, child=", ".join(c for c, _ in children), stage=stage
+    )
+    lines = []
+    for child, T in children:
+        ros2 = tf2_arguments(T, parent_frame=parent_frame, child_frame=child, ros=2)
+        ros1 = tf2_arguments(T, parent_frame=parent_frame, child_frame=child, ros=1)
+        lines.append(
+            f"\n# {child} (ROS 1: rosrun tf2_ros static_transform_publisher {' '.join(ros1)})\n"
+            f"ros2 run tf2_ros static_transform_publisher {' '.join(ros2)} &\n"
+        )
+    return (
+        "#!/bin/sh\n"
+        "# nbcalib export (tf2): every camera's extrinsic as a static transform from the LiDAR.\n"
+        f"{convention}" + "".join(lines) + "\nwait\n"
+    )
+
+
+def rig_launch_text(children, *, parent_frame: str = "lidar", stage: str = "T_lidar_camera") -> str:
+    """A ROS 2 launch file with one static transform publisher per camera (:func:`rig_tf2_text`)."""
+    convention = _TF2_CONVENTION.format(
+        parent=parent_frame, child=", ".join(c for c, _ in children), stage=stage
+    )
+    nodes = []
+    for child, T in children:
+        args = tf2_arguments(T, parent_frame=parent_frame, child_frame=child, ros=2)
+        pairs = [f'"{args[i]}", "{args[i + 1]}"' for i in range(0, len(args), 2)]
+        arguments = "".join(f"                    {pair},\n" for pair in pairs)
+        nodes.append(
+            "            Node(\n"
+            '                package="tf2_ros",\n'
+            '                executable="static_transform_publisher",\n'
+            f'                name="nbcalib_{parent_frame.strip("/").replace("/", "_")}_'
+            f'{child.strip("/").replace("/", "_")}_static_tf",\n'
+            "                arguments=[\n"
+            f"{arguments}"
+            "                ],\n"
+            "            ),\n"
+        )
+    return (
+        '"""nbcalib export: publish every camera\'s extrinsic as a static tf2 transform.\n\n'
+        "ros2 launch ./static_transforms.launch.py\n"
+        '"""\n\n'
+        f"{convention}\n"
+        "from launch import LaunchDescription\n"
+        "from launch_ros.actions import Node\n\n\n"
+        "def generate_launch_description():\n"
+        "    return LaunchDescription(\n"
+        "        [\n"
+        f"{''.join(nodes)}"
+        "        ]\n"
+        "    )\n"
+    )
+
+
+def rig_urdf_text(children, *, parent_frame: str = "lidar", stage: str = "T_lidar_camera") -> str:
+    """A URDF with the LiDAR link and a fixed joint to each camera's optical frame."""
+    parent = parent_frame.lstrip("/")
+    links, joints = [f'  <link name="{parent}"/>'], []
+    for child_frame, T_lidar_camera in children:
+        _check_frames(parent_frame, child_frame)
+        T = _transform(T_lidar_camera)
+        xyz = " ".join(_number(v) for v in T[:3, 3])
+        rpy = " ".join(_number(v) for v in rpy_from_matrix(T[:3, :3]))
+        child = child_frame.lstrip("/")
+        links.append(f'  <link name="{child}"/>')
+        joints.append(
+            f'  <joint name="{parent}_to_{child}" type="fixed">\n'
+            f'    <parent link="{parent}"/>\n'
+            f'    <child link="{child}"/>\n'
+            f'    <origin xyz="{xyz}" rpy="{rpy}"/>\n'
+            "  </joint>"
+        )
+    body = "\n".join(links + joints)
+    return f"""\
+<?xml version="1.0"?>
+<!-- nbcalib export (URDF): every camera's LiDAR-camera extrinsic as a fixed joint, results.{stage}
+     of each camera's calib.json. Convention: a joint origin is the pose of the child link in the
+     parent link, T_parent_child, p_parent = T_parent_child @ p_child: xyz in metres, rpy in
+     radians as fixed-axis angles, R = Rz(yaw) @ Ry(pitch) @ Rx(roll). Parent "{parent}" is the
+     LiDAR frame (REP 103 body axes); each child is a camera OPTICAL frame (x right, y down,
+     z forward), so each origin is that camera's T_lidar_camera. -->
+<robot name="nbcalib_extrinsics">
+{body}
+</robot>
+"""
+
+
+def export_rig(
+    workdir: str | os.PathLike,
+    cameras,
+    formats=FORMATS,
+    out_dir: str | os.PathLike | None = None,
+    *,
+    stage: str = "latest",
+    parent_frame: str = "lidar",
+) -> list[Path]:
+    """Write every camera of a several-camera work directory in one tree (module docstring).
+
+    Parameters
+    ----------
+    workdir : str or PathLike
+        ``WORK``, each camera's work directory ``WORK/<camera>``.
+    cameras : sequence of str
+        The cameras' names (``rig.json``), also their optical frames' names.
+    formats, out_dir, stage, parent_frame
+        As for :func:`export_result` (``out_dir`` default ``WORK/export``).
+
+    Returns
+    -------
+    list of Path
+        The files written.
+    """
+    from nbcalib.io._files import write_text_atomic
+
+    unknown = [f for f in formats if f not in FORMATS]
+    if unknown or not formats:
+        raise ValueError(f"formats must be a non-empty subset of {FORMATS}, got {formats!r}")
+    children, texts, keys = [], {}, set()
+    for name in cameras:
+        _check_frames(parent_frame, name)
+        calib, key = load_result(Path(workdir) / name, stage=stage)
+        keys.add(key)
+        children.append((name, pose_from_xyz_quat(calib.results[key])))
+        if "opencv" in formats:
+            texts[f"{name}/camera_lidar_opencv.yaml"] = opencv_yaml_text(
+                calib.camera_model(), calib.get_T_camera_lidar(key), stage=key
+            )
+    key = keys.pop() if len(keys) == 1 else "/".join(sorted(keys))
+    if "tf2" in formats:
+        texts["tf2_static_transforms.sh"] = rig_tf2_text(
+            children, parent_frame=parent_frame, stage=key
+        )
+        texts["static_transforms.launch.py"] = rig_launch_text(
+            children, parent_frame=parent_frame, stage=key
+        )
+    if "urdf" in formats:
+        texts["lidar_cameras.urdf"] = rig_urdf_text(children, parent_frame=parent_frame, stage=key)
+    out = Path(workdir) / "export" if out_dir is None else Path(out_dir)
+    if out.exists() and not out.is_dir():
+        raise InputError("exists and is not a folder", out)
+    written = []
+    for name, text in sorted(texts.items(), key=lambda item: ("/" in item[0], item[0])):
+        (out / name).parent.mkdir(parents=True, exist_ok=True)
+        write_text_atomic(out / name, text)
+        written.append(out / name)
+    return written

@@ -248,6 +248,11 @@ class GuessFigures:
         """Correspondences its pose explains."""
         return self._get("inliers", _is_count)
 
+    @property
+    def bound_deg(self) -> float | None:
+        """The rotation bound its noise allows, degrees (None: unbounded or not recorded)."""
+        return self._get("bound_deg", _is_number)
+
 
 @dataclass
 class InitialGuessRecord:

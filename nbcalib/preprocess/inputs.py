@@ -40,6 +40,7 @@ __all__ = [
     "IMAGE_SUFFIXES",
     "InputSpec",
     "PairInput",
+    "SharedClouds",
     "classify_inputs",
     "gather_bag",
     "gather_files",
@@ -82,10 +83,10 @@ class PairInput:
     info : dict
         Where the pair sits in its recording (``first_scan``, ``image_scan``, ...), for the
         work directory's summary.
-    clouds : dict or None
+    clouds : SharedClouds or None
         Dense clouds made of ``scans``, shared by the pairs of several cameras that hold the
-        same scans (:mod:`nbcalib.rig_pipeline`): accumulated once, for the first camera
-        (:func:`~nbcalib.preprocess.prepare.prepare_pair`). None: not shared.
+        same scans (:mod:`nbcalib.rig_pipeline`): accumulated once, for the first camera that
+        asks (:func:`~nbcalib.preprocess.prepare.prepare_pair`). None: not shared.
     """
 
     name: str
@@ -97,7 +98,24 @@ class PairInput:
     image_scan: int | None = None
     image_fraction: float = 0.0
     info: dict = field(default_factory=dict)
-    clouds: dict | None = field(default=None, repr=False)
+    clouds: SharedClouds | None = field(default=None, repr=False)
+
+
+class SharedClouds:
+    """The dense clouds of one pair's scans, made once for every camera (thread-safe)."""
+
+    def __init__(self):
+        import threading
+
+        self._clouds: dict = {}
+        self._lock = threading.Lock()
+
+    def get(self, key, make):
+        """The cloud made under ``key``; ``make()`` makes it the first time (once)."""
+        with self._lock:
+            if key not in self._clouds:
+                self._clouds[key] = make()
+            return self._clouds[key]
 
 
 def classify_inputs(

@@ -129,9 +129,7 @@ def _shared_cloud(pair: PairInput, mode: str, config: PreprocessConfig, progress
     # the same scans under the same settings (the topics aside) make the same cloud
     settings = {k: v for k, v in asdict(config).items() if not k.endswith("_topic")}
     key = (mode, repr(sorted(settings.items())))
-    if key not in pair.clouds:
-        pair.clouds[key] = _accumulate(pair, mode, config, progress)
-    return pair.clouds[key]
+    return pair.clouds.get(key, lambda: _accumulate(pair, mode, config, progress))
 
 
 def _at_image_time(cloud, scan: int, fraction: float) -> tuple[np.ndarray, float]:
