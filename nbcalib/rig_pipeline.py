@@ -264,6 +264,8 @@ class RigResult:
     rig_errors : dict of str to (float, float)
         Given rig only, no joint pose: how far each implied camera-to-camera transform is from
         the given one (metres, degrees).
+    failed : dict of str to str
+        The cameras left without a result, and why.
     seconds : float
     """
 
@@ -272,6 +274,7 @@ class RigResult:
     joint: bool = False
     T_ref_camera: dict = field(default_factory=dict)
     rig_errors: dict = field(default_factory=dict)
+    failed: dict = field(default_factory=dict)
     seconds: float = 0.0
 
 
@@ -302,6 +305,8 @@ class RigCalibrator:
         #: ``WORK/report/index.html`` once written.
         self.report: Path | None = None
         self.calibrators: dict = {}
+        #: ``{camera: message}`` of the cameras whose own stages failed.
+        self.failed: dict = {}
         #: With a rig: ``{camera: (metres, degrees)}``, how far each camera's own guess puts
         #: the rig from the start through the rig (the start's camera left out).
         self.start_disagreement: dict = {}
@@ -311,6 +316,8 @@ class RigCalibrator:
         spec,
         cameras: Sequence[CameraSource],
         *,
+        init: Start | None = None,
+        no_matching: bool = False,
         until: str | None = None,
         redo_from: str | None = None,
         overwrite: bool = True,
@@ -321,13 +328,24 @@ class RigCalibrator:
 
         ``spec``: the recording (:class:`InputSpec`, its bags read once for every camera), or
         each camera's inputs by name (``{name: ArrayInputs}``, :func:`nbcalib.calibrate`).
+        With a rig, ``init`` is the rig's start (the first camera's ``T_camera_lidar``) when no
+        camera's own guess succeeds, or, with ``no_matching``, the start itself (no camera is
+        matched).
         """
         from nbcalib.pipeline import Calibrator
         from nbcalib.workdir import check_writable
 
         t0 = time.perf_counter()
         cameras = list(cameras)
+        if (init is not None or no_matching) and self.rig is None:
+            raise InputError("a start (--init) for several cameras needs their rig (--rig)")
+        if no_matching and init is None:
+            raise InputError("--no-matching needs --init: the rig's start")
+        self._init = init
         self._check_rig(cameras)
+        if no_matching:
+            reason = "--no-matching: the rig starts from --init"
+            skip = {"find-matches": reason, "initial-guess": reason, **(skip or {})}
         if self.workdir is not None:
             check_writable(self.workdir)
         joint = self.rig is not None and until in (None, "calibrate", "report")
@@ -359,10 +377,11 @@ class RigCalibrator:
                 skip=skip,
             )
 
-        self._each(cameras, own_job)
+        self.failed = self._each(cameras, own_job)
         if joint:
             self._joint(cameras, until=until, skip=skip)
         result = self._result(cameras, joint)
+        result.failed = {n: m for n, m in self.failed.items() if result.cameras.get(n) is None}
         result.seconds = round(time.perf_counter() - t0, 3)
         if self.workdir is not None:
             job = self._write(spec, cameras, result)
@@ -370,14 +389,20 @@ class RigCalibrator:
                 from nbcalib.report.rig import write_rig_report
 
                 self.report = write_rig_report(self.workdir, job)
+        if result.failed and until in (None, "calibrate", "report"):
+            where = "" if self.workdir is None else f"; the others' results are in {self.workdir}"
+            failed = "; ".join(f"camera {n}: {m}" for n, m in result.failed.items())
+            raise InputError(f"{failed}{where}")
         return result
 
-    def _each(self, cameras, job) -> None:
+    def _each(self, cameras, job) -> dict[str, str]:
         """``job(camera)`` for each camera, :data:`CAMERA_WORKERS` at a time.
 
-        Each camera's log lines start with its name and its progress shows as step lines;
-        an error names the camera. Results are those of one camera after another: the cameras
-        share no state but the recording, read once under a lock.
+        Each camera's log lines start with its name and its progress shows as step lines.
+        Results are those of one camera after another: the cameras share no state but the
+        recording, read once under a lock. A camera's :class:`InputError` (its guess failed,
+        its images do not fit its camera) does not stop the others: returns
+        ``{camera: message}`` of those that failed.
         """
         from nbcalib._threads import thread_map
         from nbcalib.progress import lines_only
@@ -387,10 +412,13 @@ class RigCalibrator:
                 try:
                     job(source)
                 except InputError as exc:
-                    raise InputError(f"camera {source.name}: {exc}") from None
+                    log.warning("camera %s: %s", source.name, exc)
+                    return source.name, str(exc)
+            return source.name, None
 
         with _camera_log_prefix():
-            thread_map(run, cameras, workers=CAMERA_WORKERS)
+            done = thread_map(run, cameras, workers=CAMERA_WORKERS)
+        return {name: message for name, message in done if message is not None}
 
     # ------------------------------------------------------------------ the rig
     def _check_rig(self, cameras: Sequence[CameraSource]) -> None:
@@ -425,28 +453,45 @@ class RigCalibrator:
             start = self.calibrators[source.name]._start_pose(required=False)
             if start is not None:
                 starts[source.name] = start
-        if not starts:
-            raise InputError("no camera has an initial guess: the rig has no start")
-        name = min(starts, key=lambda n: self._guess_bound(n, starts[n]))
-        T_start = invert_T(self.T_camera_ref(name, ref)) @ starts[name].T_camera_lidar
-        start = Start.from_matrix(T_start, f"rig start ({name}'s {starts[name].source})")
-        self._check_starts(starts, name, T_start, ref)
-        log.info("rig: one pose from %d cameras, starting from %s's guess", len(cameras), name)
+        if starts:
+            name = min(starts, key=lambda n: self._guess_bound(n, starts[n]))
+            T_start = invert_T(self.T_camera_ref(name, ref)) @ starts[name].T_camera_lidar
+            start = Start.from_matrix(T_start, f"rig start ({name}'s {starts[name].source})")
+            self._check_starts(starts, name, T_start, ref)
+            log.info("rig: one pose from %d cameras, starting from %s's guess", len(cameras), name)
+        elif self._init is not None:
+            start = replace(self._init, source=f"rig start ({self._init.source})")
+            log.info("rig: one pose from %d cameras, starting from %s", len(cameras), start.source)
+        else:
+            raise InputError(
+                "no camera has an initial guess: the rig has no start (give the first camera's "
+                "rough T_lidar_camera with --init)"
+            )
         reference = self.calibrators[ref]
         extra = []
         for source in cameras[1:]:
             T = self.T_camera_ref(source.name, ref)
-            for pair in self.calibrators[source.name]._registration_pairs():
+            try:
+                pairs = self.calibrators[source.name]._registration_pairs()
+            except (InputError, TypeError, AttributeError):
+                log.warning("rig: camera %s has no preprocessed pairs: left out", source.name)
+                continue
+            for pair in pairs:
                 extra.append(
                     replace(pair, name=f"{source.name}/{pair.name}", T_camera_rig=T, classes=None)
                 )
         reference.rig_pairs = extra
-        reference.run(self._inputs[ref], init=start, redo_from="calibrate", until=until, skip=skip)
+        with _camera_log_prefix(), _camera_lines(f"rig ({ref})"):
+            reference.run(
+                self._inputs[ref], init=start, redo_from="calibrate", until=until, skip=skip
+            )
         if reference.refinement is None:
             return
         T_ref = reference._result_pose()
 
         def follow(source):  # the rig's pose through the rig, and the camera's own report
+            if self.calibrators[source.name].pairs is None and self.workdir is None:
+                return  # never preprocessed (its error is in self.failed)
             calibrator = self.calibrators[source.name]
             calibrator.adopt_result(
                 self.T_camera_ref(source.name, ref) @ T_ref,
@@ -456,7 +501,10 @@ class RigCalibrator:
             )
             calibrator.run(self._inputs[source.name], until=until, skip=skip)
 
-        self._each(cameras[1:], follow)
+        self.failed.update(self._each(cameras[1:], follow))
+        for source in cameras:  # a camera the rig calibrated has not failed, whatever its guess
+            if self.calibrators[source.name].result() is not None:
+                self.failed.pop(source.name, None)
 
     def _check_starts(self, starts: dict, chosen: str, T_start, ref: str) -> None:
         """Each camera's own guess through the rig against the rig's start: a rig that fits.
@@ -539,6 +587,7 @@ class RigCalibrator:
                     "T_ref_camera": None
                     if c.name not in result.T_ref_camera
                     else _values(result.T_ref_camera[c.name]),
+                    "failed": result.failed.get(c.name),
                 }
                 for c in cameras
             ],

@@ -806,6 +806,22 @@ def check_your_own_sensors(ns):
         assert view.std() > 5, view.std()  # measured 80
     assert len(ns["_figures"]) == 5 + (view is not None), len(ns["_figures"])
 
+    # ---- the camera ring: both cameras, one rig pose, a line per camera
+    assert {"/cam0/image", "/cam1/image", "/cam0/camera_info", "/cam1/camera_info"} <= set(
+        ns["ring_topics"]
+    )
+    assert ns["rig_names"] == ["cam0", "cam1"]
+    assert ns["ring_status"] == 0 and ns["ring_eval_status"] == 0
+    lines = ns["ring_lines"]
+    assert lines[0]["rig"] == "cam0" and [x.get("camera") for x in lines[1:]] == ["cam0", "cam1"]
+    start = ns["ring_start_errors"]
+    for line in lines[1:]:  # measured in quick mode: 1.6 cm / 0.30 deg, from 3.0 cm / 0.86 deg
+        assert line["translation_error_m"] <= 0.05 and line["rotation_error_deg"] <= 0.7, line
+        assert line["rotation_error_deg"] < start["rotation_error_deg"], (line, start)
+    assert abs(lines[1]["rotation_error_deg"] - lines[2]["rotation_error_deg"]) < 1e-6
+    assert ns["rig_job"]["joint"] is True
+    assert ns["ring_urdf"].count("<joint ") == 2
+
 
 CHECKS = {
     "00_frames_and_transforms": check_frames_and_transforms,

@@ -184,10 +184,19 @@ def test_a_ring_run_makes_a_work_directory_per_camera_with_one_dense_cloud(
     assert "2 cameras" in capsys.readouterr().out
 
 
-def test_a_ring_run_refuses_one_camera_options(ring_bag, tmp_path, capsys):
-    args = ["run", str(ring_bag / "pair_000"), str(tmp_path / "w"), "--init", "0,0,0,0,0,0,1"]
+@pytest.mark.parametrize(
+    "extra, message",
+    [
+        (["--init", "0,0,0,0,0,0,1"], "--init/--no-matching with several cameras need --rig"),
+        (["--manual", "picks.json"], "--manual is for one camera"),
+        (["--prior", "0,0,0,0,0,0,1"], "--prior is for one camera"),
+    ],
+)
+def test_a_ring_run_refuses_one_camera_options(ring_bag, tmp_path, capsys, extra, message):
+    args = ["run", str(ring_bag / "pair_000"), str(tmp_path / "w"), *extra]
     assert main(args) == 2
-    assert "--init is for one camera" in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert message in err and len(err.strip().splitlines()) == 1
 
 
 def _rig_workdir(path):
@@ -259,3 +268,21 @@ def test_the_rig_report_has_a_section_per_camera_and_the_rig(tmp_path):
     for text in ("Camera cam0", "Camera cam1", "The rig", "T_cam0_camera", "/cam1/image"):
         assert text in page
     assert "No report yet" in page  # the fake cameras have results but no report
+
+
+def test_a_rig_that_does_not_fit_the_cameras_guesses_is_refused():
+    from nbcalib.io.rig import Rig, RigCamera
+    from nbcalib.products import Start
+    from nbcalib.rig_pipeline import CameraSource, RigCalibrator
+
+    T_cam1_cam0 = se3_exp(np.array([0.1, 0.0, 0.0, 0.0, np.radians(90.0), 0.0]))
+    rig = Rig((RigCamera("cam0", None, np.eye(4)), RigCamera("cam1", None, T_cam1_cam0)))
+    job = RigCalibrator(rig=rig)
+    job._check_rig([CameraSource("cam0", "/cam0/image"), CameraSource("cam1", "/cam1/image")])
+    T0 = se3_exp(np.array([0.05, 0.02, 0.0, 0.1, 0.2, 0.0]))
+    fits = {"cam0": Start.from_matrix(T0, "a"), "cam1": Start.from_matrix(T_cam1_cam0 @ T0, "b")}
+    job._check_starts(fits, "cam0", T0, "cam0")
+    assert job.start_disagreement["cam1"][1] < 1e-6
+    swapped = {"cam0": fits["cam0"], "cam1": Start.from_matrix(T0, "b")}  # a rig of other cameras
+    with pytest.raises(InputError, match="the rig does not fit the cameras"):
+        job._check_starts(swapped, "cam0", T0, "cam0")

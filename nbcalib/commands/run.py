@@ -228,6 +228,8 @@ def run(args: argparse.Namespace) -> int:
         result = job.run(
             spec,
             cameras,
+            init=init,
+            no_matching=no_matching,
             until=options.get("until"),
             redo_from="preprocess" if force else options.get("from_stage"),
             overwrite=force or options.get("from_stage") is not None,
@@ -281,12 +283,17 @@ def _cameras(spec, config, workdir, options, given_inputs):
         if rig_path is not None:
             raise InputError("--rig is for several cameras: give a bag with several image topics")
         return spec, None, None, None
-    for flag in ("init", "manual", "prior", "no_matching"):
+    for flag in ("manual", "prior"):
         if options.get(flag):
             raise InputError(
-                f"--{flag.replace('_', '-')} is for one camera; several cameras find their "
-                "starts by matching"
+                f"--{flag} is for one camera; several cameras find their starts by matching "
+                "(with --rig, --init gives the rig's)"
             )
+    if rig_path is None and (options.get("init") or options.get("no_matching")):
+        raise InputError(
+            "--init/--no-matching with several cameras need --rig: the start is the rig's (the "
+            "first camera's T_lidar_camera)"
+        )
     rig = None
     if rig_path is not None:
         from nbcalib.io.rig import read_rig
