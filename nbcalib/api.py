@@ -205,7 +205,8 @@ def calibrate(
     rig : Rig or str or os.PathLike, optional
         Several cameras only: their known camera-to-camera extrinsics
         (:class:`nbcalib.io.rig.Rig`, or a Kalibr camchain or nbcalib rig file), named as the
-        cameras: one rig pose from every camera (:mod:`nbcalib.rig_pipeline`).
+        cameras: one rig pose from every camera (:mod:`nbcalib.rig_pipeline`); ``T_init`` is
+        then the first camera's start.
     workdir : str or os.PathLike, optional
         Keep the work directory here (``calib.json`` gets the results); default: in memory.
     config : CalibrationConfig, optional
@@ -291,7 +292,11 @@ def calibrate(
 def _calibrate_cameras(
     points, intensities, images, cameras, config, rig, T_init, workdir, model_dir, progress, log
 ):
-    """Several cameras (images and cameras by name): :class:`nbcalib.rig_pipeline.RigCalibrator`."""
+    """Several cameras (images and cameras by name): :class:`nbcalib.rig_pipeline.RigCalibrator`.
+
+    With a rig, ``T_init`` is the rig's start (the first camera's), and no camera is matched.
+    """
+    from nbcalib.products import Start
     from nbcalib.rig_pipeline import CameraSource, RigCalibrator
 
     if not (isinstance(images, dict) and isinstance(cameras, dict)):
@@ -300,12 +305,18 @@ def _calibrate_cameras(
         raise ValueError(
             f"image and camera must name the same cameras: {sorted(images)} vs {sorted(cameras)}"
         )
-    if T_init is not None:
-        raise ValueError("T_init is for one camera; several cameras find their starts by matching")
+    if T_init is not None and rig is None:
+        raise ValueError(
+            "T_init with several cameras needs their rig: it is the rig's start (the first "
+            "camera's T_camera_lidar)"
+        )
     if rig is not None and not hasattr(rig, "cameras"):
         from nbcalib.io.rig import read_rig
 
         rig = read_rig(rig)
+    start = T_init
+    if T_init is not None and not isinstance(T_init, Start):
+        start = Start.from_matrix(T_init, "T_init")
     clouds = _as_list(points, "points")
     values = _as_list(intensities, "intensities") if intensities is not None else [None]
     if len(values) == 1 and len(clouds) > 1 and values[0] is None:
@@ -323,4 +334,4 @@ def _calibrate_cameras(
     job = RigCalibrator(config, workdir=workdir, model_dir=model_dir, rig=rig)
     with api_output(progress, log):
         compiling_note()
-        return job.run(inputs, sources)
+        return job.run(inputs, sources, init=start, no_matching=start is not None)
