@@ -389,7 +389,7 @@ class RigCalibrator:
                 from nbcalib.report.rig import write_rig_report
 
                 self.report = write_rig_report(self.workdir, job)
-        if result.failed and until in (None, "calibrate", "report"):
+        if result.failed:
             where = "" if self.workdir is None else f"; the others' results are in {self.workdir}"
             failed = "; ".join(f"camera {n}: {m}" for n, m in result.failed.items())
             raise InputError(f"{failed}{where}")

@@ -348,3 +348,8 @@ def test_a_ring_camera_is_preprocessed_as_the_one_camera_job_of_its_topic(ring_b
     for key in ("camera", "virtual_camera", "preprocess", "config", "inputs"):
         assert a["nbcalib"][key] == b["nbcalib"][key], key
     assert a["camera"] == b["camera"]
+
+
+def test_topics_says_run_takes_every_camera(ring_bag, capsys):
+    assert main(["topics", str(ring_bag / "pair_000")]) == 0
+    assert "nbcalib run calibrates each of the 2 cameras" in capsys.readouterr().out

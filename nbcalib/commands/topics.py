@@ -69,6 +69,11 @@ def describe_bag(path) -> str:
         else:
             chosen = f"nothing: no {kind} topic ({', '.join(MESSAGE_KINDS[kind])})"
         lines.append(f"  {kind + ':':<13} {chosen}")
+    if len(candidates["image"]) > 1:
+        lines.append(
+            f"nbcalib run calibrates each of the {len(candidates['image'])} cameras "
+            "(--camera-topics to choose some; --rig FILE with known camera-to-camera extrinsics)"
+        )
     return "\n".join(lines)
 
 
