@@ -602,7 +602,7 @@ class RigCalibrator:
                 name: {"translation_m": dt, "rotation_deg": dr}
                 for name, (dt, dr) in self.start_disagreement.items()
             },
-            "inputs": spec.to_dict() if isinstance(spec, InputSpec) else None,
+            "inputs": _inputs_record(spec),
             "seconds": result.seconds,
         }
         write_text_atomic(self.workdir / RIG_JOB, json.dumps(doc, indent=2) + "\n")
@@ -639,6 +639,16 @@ def _camera_log_prefix():
         yield
     finally:
         logging.setLogRecordFactory(previous)
+
+
+def _inputs_record(spec) -> dict | None:
+    """What ``rig.json`` records of the inputs, for ``nbcalib run WORK`` to continue with."""
+    if isinstance(spec, InputSpec):
+        return spec.to_dict()
+    specs = dict(spec)
+    if specs and all(isinstance(v, InputSpec) for v in specs.values()):
+        return {"per_camera": {name: v.to_dict() for name, v in specs.items()}}
+    return None  # arrays (nbcalib.calibrate) are not recorded
 
 
 def _values(T) -> list[float]:

@@ -353,3 +353,24 @@ def test_a_ring_camera_is_preprocessed_as_the_one_camera_job_of_its_topic(ring_b
 def test_topics_says_run_takes_every_camera(ring_bag, capsys):
     assert main(["topics", str(ring_bag / "pair_000")]) == 0
     assert "nbcalib run calibrates each of the 2 cameras" in capsys.readouterr().out
+
+
+def test_several_cameras_from_files_each_with_its_image_and_camera(tmp_path, capsys):
+    data, work = tmp_path / "ring", tmp_path / "work"
+    export_dataset(RigConfig(cameras=("pinhole", "fisheye:160x120"), **SMALL), data, fmt="files")
+    cams = []
+    for name in ("cam0", "cam1"):
+        cams += ["--camera-image", name, str(data / name / "pair_000.png")]
+        cams += [str(data / name / "camera.yaml")]
+    args = ["run", str(data / "pair_000.pcd"), str(work), "--until", "preprocess", "-q", *cams]
+    assert main(args) == 0
+    job = json.loads((work / "rig.json").read_text())
+    assert sorted(job["inputs"]["per_camera"]) == ["cam0", "cam1"]
+    for name, model in (("cam0", "pinhole"), ("cam1", "fisheye")):
+        calib = json.loads((work / name / "calib.json").read_text())
+        assert calib["nbcalib"]["camera"]["camera_model"] == model
+        assert calib["nbcalib"]["inputs"]["image"].endswith(f"{name}/pair_000.png")
+    assert main(["run", str(work), "--until", "preprocess", "-q"]) == 0  # continues from rig.json
+    bad = ["run", str(data / "pair_000.pcd"), str(tmp_path / "w2"), "--image", "x.png", *cams]
+    assert main(bad) == 2
+    assert "--camera-image gives each camera its image" in capsys.readouterr().err

@@ -72,6 +72,8 @@ examples:
   nbcalib run --config job.toml data.bag work/
   nbcalib run ring.bag work/                   # every camera of a bag with several image topics
   nbcalib run ring.bag work/ --camera-topics /front/image,/left/image --rig camchain.yaml
+  nbcalib run scan.pcd work/ --camera-image front front.png front.yaml \
+      --camera-image left left.png left.yaml
   nbcalib evaluate work/ --ground-truth ground_truth.json
 
 job.toml (tables are the config's sections; keys their settings, or option names):
@@ -107,6 +109,9 @@ RUN_OPTIONS = (
            "(default: every image topic of a bag that has several)", "T1,T2,..."),
     Option("--rig", "", "several cameras with known camera-to-camera extrinsics (a Kalibr "
            "camchain or an nbcalib rig file): one rig pose from every camera", "FILE"),
+    Option("--camera-image", "", "several cameras from files: a camera's name, its image and "
+           "its camera file, once per camera, with the point clouds as INPUT or --points",
+           ("NAME", "IMAGE", "CAMERA")),
 )  # fmt: skip
 
 #: Inputs a config file may give by option name (``frames = "kitti/"``), as on the command line.
@@ -146,6 +151,8 @@ def add_parser(subparsers, formatter_class=argparse.HelpFormatter) -> argparse.A
                 kwargs["choices"] = STAGES
             if isinstance(option.metavar, tuple):
                 kwargs["nargs"] = len(option.metavar)
+            if option.flag == "--camera-image":
+                kwargs["action"] = "append"
         else:
             kwargs["action"] = "store_true"
         dest = "from_stage" if option.flag == "--from" else option.dest
@@ -260,25 +267,32 @@ def _cameras(spec, config, workdir, options, given_inputs):
     ``nbcalib run WORKDIR`` of a several-camera job takes its inputs, cameras and rig file
     from ``WORKDIR/rig.json``.
     """
-    from pathlib import Path
-
     from nbcalib.preprocess.inputs import InputSpec
     from nbcalib.rig_pipeline import CameraSource, find_cameras, read_rig_job
 
     topics = options.get("camera_topics")
     rig_path = options.get("rig")
+    files = options.get("camera_image")
     job = None if given_inputs else read_rig_job(workdir)
     if job is not None:  # nbcalib run WORKDIR of a several-camera job
-        spec = InputSpec.from_dict(job.get("inputs") or {})
+        inputs = job.get("inputs") or {}
+        rig_path = rig_path or job.get("rig_file")
+        if isinstance(inputs.get("per_camera"), dict):  # cameras from files
+            spec = {n: InputSpec.from_dict(d) for n, d in inputs["per_camera"].items()}
+            cameras = [CameraSource(name, "") for name in spec]
+            return spec, cameras, *_read_rig(rig_path)
+        spec = InputSpec.from_dict(inputs)
         recorded = [CameraSource(c["name"], c["image_topic"], c.get("camera_info_topic"))
                     for c in job["cameras"]]  # fmt: skip
-        rig_path = rig_path or job.get("rig_file")
         topics = topics or ",".join(c.image_topic for c in recorded)
     elif not given_inputs and topics is None and rig_path is None:
         return spec, None, None, None  # nbcalib run WORKDIR of a one-camera job
     if topics is not None:
         topics = [t.strip() for t in str(topics).split(",") if t.strip()]
-    cameras = find_cameras(spec, config.preprocess, topics)
+    if files:
+        spec, cameras = _file_cameras(spec, files, topics)
+    else:
+        cameras = find_cameras(spec, config.preprocess, topics)
     if cameras is None:
         if rig_path is not None:
             raise InputError("--rig is for several cameras: give a bag with several image topics")
@@ -294,13 +308,53 @@ def _cameras(spec, config, workdir, options, given_inputs):
             "--init/--no-matching with several cameras need --rig: the start is the rig's (the "
             "first camera's T_lidar_camera)"
         )
-    rig = None
-    if rig_path is not None:
-        from nbcalib.io.rig import read_rig
+    return spec, cameras, *_read_rig(rig_path)
 
-        rig = read_rig(rig_path)
-        rig_path = str(Path(rig_path).absolute())
-    return spec, cameras, rig, rig_path
+
+def _read_rig(path):
+    """(the rig, its absolute path), or (None, None)."""
+    from pathlib import Path
+
+    if path is None:
+        return None, None
+    from nbcalib.io.rig import read_rig
+
+    return read_rig(path), str(Path(path).absolute())
+
+
+def _file_cameras(spec, files, topics):
+    """Several cameras from files (``--camera-image NAME IMAGE CAMERA``): an InputSpec each.
+
+    Every camera takes the point clouds of ``spec`` (INPUT or ``--points``) with its own
+    image and camera file; the cameras' order is the options' (the first is the reference).
+    """
+    from dataclasses import replace
+
+    from nbcalib.preprocess.inputs import CLOUD_SUFFIXES, InputSpec
+    from nbcalib.rig_pipeline import CameraSource, camera_name
+
+    if topics:
+        raise InputError("give cameras as --camera-topics (bags) or --camera-image (files)")
+    clouds = [p for p in spec.inputs if str(p).lower().endswith(CLOUD_SUFFIXES)]
+    if len(clouds) != len(spec.inputs) or not (clouds or spec.points):
+        raise InputError("--camera-image takes point cloud files as INPUT or --points (no bag)")
+    if spec.image or spec.camera or spec.camera_model or spec.per_image:
+        raise InputError(
+            "--camera-image gives each camera its image and camera: leave out --image, "
+            "--camera, --camera-model and the per-image options"
+        )
+    specs, cameras = {}, []
+    for name, image, camera in files:
+        if camera_name(f"/{name}/image") != name:
+            raise InputError(f"--camera-image: {name!r} is no camera name (letters, digits, _ . -)")
+        if name in specs:
+            raise InputError(f"--camera-image: camera {name} given twice")
+        specs[name] = InputSpec(inputs=spec.inputs, points=spec.points, image=image, camera=camera)
+        cameras.append(CameraSource(name, ""))
+    if len(cameras) < 2:
+        one = files[0]
+        return replace(spec, image=one[1], camera=one[2]), None
+    return specs, cameras
 
 
 def _rig_summary(job, result) -> None:
