@@ -157,8 +157,9 @@ def find_cameras(
 class _Recording:
     """Every bag of a job read once: each pair's scans, and each camera's image and camera info."""
 
-    def __init__(self, spec: InputSpec, cameras: Sequence[CameraSource], rig=None):
-        self.spec, self.cameras, self.rig = spec, list(cameras), rig
+    def __init__(self, spec: InputSpec, cameras: Sequence[CameraSource], rig_cameras=None):
+        self.spec, self.cameras = spec, list(cameras)
+        self.rig_cameras = dict(rig_cameras or {})  # {camera: CameraModel} of a given rig
         self._pairs: dict[str, list[PairInput]] | None = None
         self._camera: dict[str, object] = {}
         self._data_path = ""
@@ -179,31 +180,21 @@ class _Recording:
 
     def _read(self, config: PreprocessConfig) -> None:
         from nbcalib.io.bag import open_bag
+        from nbcalib.preprocess.inputs import bag_scans, first_image
 
         bags = sorted(classify_inputs(self.spec.inputs)[0], key=lambda p: p.name)
         pairs: dict[str, list[PairInput]] = {c.name: [] for c in self.cameras}
         for path in bags:
             with open_bag(path) as bag:
                 points_topic = bag.select_topic("point cloud", config.points_topic)
-                scans = []
-                for _, cloud in bag.pointclouds(
-                    points_topic, intensity_channel=config.intensity_channel
-                ):
-                    scans.append(cloud)
-                    if config.max_scans is not None and len(scans) >= config.max_scans:
-                        break
-                if not scans:
-                    raise InputError(f"point cloud topic {points_topic} has no messages", path)
+                scans = bag_scans(bag, points_topic, config, path)
                 clouds = SharedClouds()  # one dense cloud per pair, for every camera
                 for source in self.cameras:
-                    frames = bag.images(source.image_topic, grey=True)
-                    image = next((img for _, img in frames), None)
-                    if image is None:
-                        raise InputError(f"image topic {source.image_topic} has no messages", path)
+                    image = first_image(bag, source.image_topic, path)
                     info = source.camera_info_topic
                     camera = bag.camera_info(info) if info is not None else None
-                    if camera is None and self.rig is not None and source.name in self.rig.names():
-                        camera = {c.name: c for c in self.rig.cameras}[source.name].camera
+                    if camera is None:  # the rig's camera of this name, if any
+                        camera = self.rig_cameras.get(source.name)
                     self._camera.setdefault(source.name, camera)
                     topics = {
                         "points_topic": points_topic,
@@ -350,7 +341,7 @@ class RigCalibrator:
             check_writable(self.workdir)
         joint = self.rig is not None and until in (None, "calibrate", "report")
         if isinstance(spec, InputSpec):
-            recording = _Recording(spec, cameras, self.rig)
+            recording = _Recording(spec, cameras, self._rig_cameras())
             self._inputs = {c.name: _CameraInputs(spec, c.name, recording) for c in cameras}
         else:
             self._inputs = dict(spec)
@@ -440,6 +431,13 @@ class RigCalibrator:
                 f"{', '.join(self.rig.names())}); name them as the topics' namespaces or give "
                 "their topics"
             )
+
+    def _rig_cameras(self) -> dict:
+        """``{camera: CameraModel}`` the rig file gives (for cameras without camera info)."""
+        if self.rig is None:
+            return {}
+        models = {c.name: c.camera for c in self.rig.cameras}
+        return {name: models[rig] for name, rig in self._rig_names.items() if rig is not None}
 
     def T_camera_ref(self, name: str, reference: str) -> np.ndarray:
         """``T_<name>_<reference>`` from the rig."""

@@ -174,25 +174,34 @@ def gather_bag(path, config: PreprocessConfig) -> PairInput:
     path = Path(path)
     with open_bag(path) as bag:
         points_topic, image_topic, info_topic, camera = bag_topics(bag, config, path)
-        image = None
-        for _, img in bag.images(image_topic, grey=True):
-            image = img
-            break
-        if image is None:
-            raise InputError(f"image topic {image_topic} has no messages", path=path)
-        scans = []
-        for _, cloud in bag.pointclouds(points_topic, intensity_channel=config.intensity_channel):
-            scans.append(cloud)
-            if config.max_scans is not None and len(scans) >= config.max_scans:
-                break
-    if not scans:
-        raise InputError(f"point cloud topic {points_topic} has no messages", path=path)
+        image = first_image(bag, image_topic, path)
+        scans = bag_scans(bag, points_topic, config, path)
     topics = {
         "points_topic": points_topic,
         "image_topic": image_topic,
         "camera_info_topic": info_topic,
     }
     return PairInput(bag_name(path), scans, image, f"{path} {image_topic}", camera, topics)
+
+
+def first_image(bag, topic: str, path) -> np.ndarray:
+    """The first image of ``topic``, grey; InputError when the topic has none."""
+    image = next((img for _, img in bag.images(topic, grey=True)), None)
+    if image is None:
+        raise InputError(f"image topic {topic} has no messages", path=path)
+    return image
+
+
+def bag_scans(bag, topic: str, config: PreprocessConfig, path) -> list:
+    """Every point cloud of ``topic`` (at most ``config.max_scans``); InputError when none."""
+    scans = []
+    for _, cloud in bag.pointclouds(topic, intensity_channel=config.intensity_channel):
+        scans.append(cloud)
+        if config.max_scans is not None and len(scans) >= config.max_scans:
+            break
+    if not scans:
+        raise InputError(f"point cloud topic {topic} has no messages", path=path)
+    return scans
 
 
 def gather_files(
