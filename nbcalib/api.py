@@ -88,6 +88,15 @@ def _as_list(value, what: str) -> list:
     return [value]
 
 
+def _clouds(points, intensities) -> tuple[list, list]:
+    """The clouds (one per pair) and their intensities (None for each when not given)."""
+    clouds = _as_list(points, "points")
+    values = _as_list(intensities, "intensities") if intensities is not None else [None]
+    if len(values) == 1 and len(clouds) > 1 and values[0] is None:
+        values = values * len(clouds)
+    return clouds, values
+
+
 def _load_cloud(points, intensities, channel: str):
     """A :class:`~nbcalib.io.pointcloud.PointCloud` from a file or from arrays."""
     from nbcalib.io.pointcloud import PointCloud, read_pointcloud
@@ -270,11 +279,8 @@ def calibrate(
         )
     if rig is not None:
         raise ValueError("rig is for several cameras: give image and camera by camera name")
-    clouds = _as_list(points, "points")
-    values = _as_list(intensities, "intensities") if intensities is not None else [None]
+    clouds, values = _clouds(points, intensities)
     images = _as_list(image, "image")
-    if len(values) == 1 and len(clouds) > 1 and values[0] is None:
-        values = values * len(clouds)
     if not len(clouds) == len(values) == len(images):
         raise ValueError(
             f"one image and one intensity array per cloud: got {len(clouds)} clouds, "
@@ -317,10 +323,7 @@ def _calibrate_cameras(
     start = T_init
     if T_init is not None and not isinstance(T_init, Start):
         start = Start.from_matrix(T_init, "T_init")
-    clouds = _as_list(points, "points")
-    values = _as_list(intensities, "intensities") if intensities is not None else [None]
-    if len(values) == 1 and len(clouds) > 1 and values[0] is None:
-        values = values * len(clouds)
+    clouds, values = _clouds(points, intensities)
     inputs = {}
     for name in images:
         shots = _as_list(images[name], f"image {name!r}")

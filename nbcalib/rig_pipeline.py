@@ -52,7 +52,7 @@ from nbcalib.preprocess.inputs import (
     classify_inputs,
 )
 from nbcalib.products import Start
-from nbcalib.transforms import invert_T, pose_error, pose_from_xyz_quat, pose_to_xyz_quat
+from nbcalib.transforms import invert_T, pose_error, pose_to_xyz_quat
 
 __all__ = ["CameraSource", "RigCalibrator", "RigResult", "find_cameras", "read_rig_job"]
 
@@ -664,8 +664,7 @@ def read_rig_job(workdir) -> dict | None:
         raise InputError(f"cannot read: {exc}", path) from None
     if not isinstance(doc, dict) or not isinstance(doc.get("cameras"), list):
         raise InputError("not an nbcalib rig job (no camera list)", path)
-    for entry in doc["cameras"]:
-        values = entry.get("T_ref_camera") if isinstance(entry, dict) else None
-        if values is not None:
-            entry["T_ref_camera_matrix"] = pose_from_xyz_quat(values)
+    for k, entry in enumerate(doc["cameras"]):
+        if not isinstance(entry, dict) or not isinstance(entry.get("name"), str):
+            raise InputError(f"cameras[{k}]: expected an object with a name", path)
     return doc

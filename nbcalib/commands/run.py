@@ -224,6 +224,12 @@ def run(args: argparse.Namespace) -> int:
         check_model_dir(options.get("model_dir"))
     force = bool(options.get("force"))
     spec, cameras, rig, rig_file = _cameras(spec, config, workdir, options, given_inputs)
+    plan = {  # which stages run: the same for one camera and for several
+        "until": options.get("until"),
+        "redo_from": "preprocess" if force else options.get("from_stage"),
+        "overwrite": force or options.get("from_stage") is not None,
+        "skip": {"report": "--no-report"} if options.get("no_report") else None,
+    }
     warmup.compiling_note()
     warmup.start()  # a first run: the later stages' kernels compile beside the first ones
     if cameras is not None:
@@ -232,16 +238,7 @@ def run(args: argparse.Namespace) -> int:
         job = RigCalibrator(
             config, workdir=workdir, model_dir=options.get("model_dir"), rig=rig, rig_file=rig_file
         )
-        result = job.run(
-            spec,
-            cameras,
-            init=init,
-            no_matching=no_matching,
-            until=options.get("until"),
-            redo_from="preprocess" if force else options.get("from_stage"),
-            overwrite=force or options.get("from_stage") is not None,
-            skip={"report": "--no-report"} if options.get("no_report") else None,
-        )
+        result = job.run(spec, cameras, init=init, no_matching=no_matching, **plan)
         _rig_summary(job, result)
         return 0
     calibrator = Calibrator(config, workdir=work, model_dir=options.get("model_dir"))
@@ -252,10 +249,7 @@ def run(args: argparse.Namespace) -> int:
         init_is_fallback=not (no_matching and manual is None),
         manual=manual,
         prior=prior,
-        until=options.get("until"),
-        redo_from="preprocess" if force else options.get("from_stage"),
-        overwrite=force or options.get("from_stage") is not None,
-        skip={"report": "--no-report"} if options.get("no_report") else None,
+        **plan,
     )
     _summary(calibrator)
     return 0

@@ -218,9 +218,7 @@ def ros2_launch_text(
     Parameters are those of :func:`tf2_text`; the arguments are the ROS 2 form of
     :func:`tf2_arguments`.
     """
-    args = tf2_arguments(T_lidar_camera, parent_frame=parent_frame, child_frame=child_frame, ros=2)
-    pairs = [f'"{args[i]}", "{args[i + 1]}"' for i in range(0, len(args), 2)]
-    arguments = "".join(f"                    {pair},\n" for pair in pairs)
+    arguments = _launch_arguments(T_lidar_camera, parent_frame, child_frame)
     convention = _TF2_CONVENTION.format(parent=parent_frame, child=child_frame, stage=stage)
     return (
         '"""nbcalib export: publish the LiDAR-camera extrinsic as a static tf2 transform.\n\n'
@@ -243,6 +241,13 @@ def ros2_launch_text(
         "        ]\n"
         "    )\n"
     )
+
+
+def _launch_arguments(T_lidar_camera, parent_frame: str, child_frame: str) -> str:
+    """A launch file Node's ``arguments`` lines: the ROS 2 form of :func:`tf2_arguments`."""
+    args = tf2_arguments(T_lidar_camera, parent_frame=parent_frame, child_frame=child_frame, ros=2)
+    pairs = [f'"{args[i]}", "{args[i + 1]}"' for i in range(0, len(args), 2)]
+    return "".join(f"                    {pair},\n" for pair in pairs)
 
 
 # ---------------------------------------------------------------------- URDF
@@ -272,10 +277,8 @@ def urdf_text(
         robot description.
     """
     _check_frames(parent_frame, child_frame)
-    T = _transform(T_lidar_camera)
-    xyz = " ".join(_number(v) for v in T[:3, 3])
-    rpy = " ".join(_number(v) for v in rpy_from_matrix(T[:3, :3]))
     parent, child = parent_frame.lstrip("/"), child_frame.lstrip("/")
+    joint = _urdf_joint(parent, child, T_lidar_camera)
     return f"""\
 <?xml version="1.0"?>
 <!-- nbcalib export (URDF): the LiDAR-camera extrinsic as a fixed joint, results.{stage}.
@@ -287,13 +290,23 @@ def urdf_text(
 <robot name="nbcalib_extrinsic">
   <link name="{parent}"/>
   <link name="{child}"/>
-  <joint name="{parent}_to_{child}" type="fixed">
-    <parent link="{parent}"/>
-    <child link="{child}"/>
-    <origin xyz="{xyz}" rpy="{rpy}"/>
-  </joint>
+{joint}
 </robot>
 """
+
+
+def _urdf_joint(parent: str, child: str, T_lidar_camera) -> str:
+    """The fixed ``<joint>`` element (indented, no final newline) of a URDF export."""
+    T = _transform(T_lidar_camera)
+    xyz = " ".join(_number(v) for v in T[:3, 3])
+    rpy = " ".join(_number(v) for v in rpy_from_matrix(T[:3, :3]))
+    return (
+        f'  <joint name="{parent}_to_{child}" type="fixed">\n'
+        f'    <parent link="{parent}"/>\n'
+        f'    <child link="{child}"/>\n'
+        f'    <origin xyz="{xyz}" rpy="{rpy}"/>\n'
+        "  </joint>"
+    )
 
 
 # ---------------------------------------------------------------------- OpenCV
@@ -433,11 +446,7 @@ def export_result(
     list of Path
         The files written, in :data:`FILE_NAMES` order.
     """
-    from nbcalib.io._files import write_text_atomic
-
-    unknown = [f for f in formats if f not in FORMATS]
-    if unknown or not formats:
-        raise ValueError(f"formats must be a non-empty subset of {FORMATS}, got {formats!r}")
+    _check_formats(formats)
     _check_frames(parent_frame, child_frame)
     calib, key = load_result(workdir, stage=stage)
     T_camera_lidar = calib.get_T_camera_lidar(key)
@@ -453,18 +462,31 @@ def export_result(
     if "opencv" in formats:
         camera = calib.camera_model()
         texts["camera_lidar_opencv.yaml"] = opencv_yaml_text(camera, T_camera_lidar, stage=key)
+    return _write_texts(workdir, out_dir, texts)
+
+
+# ---------------------------------------------------------------------- helpers
+def _check_formats(formats) -> None:
+    unknown = [f for f in formats if f not in FORMATS]
+    if unknown or not formats:
+        raise ValueError(f"formats must be a non-empty subset of {FORMATS}, got {formats!r}")
+
+
+def _write_texts(workdir, out_dir, texts: dict) -> list[Path]:
+    """Write ``{relative name: text}`` into ``out_dir`` (default ``WORKDIR/export``), in order."""
+    from nbcalib.io._files import write_text_atomic
+
     out = Path(workdir) / "export" if out_dir is None else Path(out_dir)
     if out.exists() and not out.is_dir():
         raise InputError("exists and is not a folder", out)
-    out.mkdir(parents=True, exist_ok=True)
     written = []
     for name, text in texts.items():
+        (out / name).parent.mkdir(parents=True, exist_ok=True)
         write_text_atomic(out / name, text)
         written.append(out / name)
     return written
 
 
-# ---------------------------------------------------------------------- helpers
 def _transform(T) -> np.ndarray:
     return validate_T(np.ascontiguousarray(T, dtype=np.float64), name="T")
 
@@ -524,9 +546,7 @@ def rig_launch_text(children, *, parent_frame: str = "lidar", stage: str = "T_li
     )
     nodes = []
     for child, T in children:
-        args = tf2_arguments(T, parent_frame=parent_frame, child_frame=child, ros=2)
-        pairs = [f'"{args[i]}", "{args[i + 1]}"' for i in range(0, len(args), 2)]
-        arguments = "".join(f"                    {pair},\n" for pair in pairs)
+        arguments = _launch_arguments(T, parent_frame, child)
         nodes.append(
             "            Node(\n"
             '                package="tf2_ros",\n'
@@ -560,18 +580,9 @@ def rig_urdf_text(children, *, parent_frame: str = "lidar", stage: str = "T_lida
     links, joints = [f'  <link name="{parent}"/>'], []
     for child_frame, T_lidar_camera in children:
         _check_frames(parent_frame, child_frame)
-        T = _transform(T_lidar_camera)
-        xyz = " ".join(_number(v) for v in T[:3, 3])
-        rpy = " ".join(_number(v) for v in rpy_from_matrix(T[:3, :3]))
         child = child_frame.lstrip("/")
         links.append(f'  <link name="{child}"/>')
-        joints.append(
-            f'  <joint name="{parent}_to_{child}" type="fixed">\n'
-            f'    <parent link="{parent}"/>\n'
-            f'    <child link="{child}"/>\n'
-            f'    <origin xyz="{xyz}" rpy="{rpy}"/>\n'
-            "  </joint>"
-        )
+        joints.append(_urdf_joint(parent, child, T_lidar_camera))
     body = "\n".join(links + joints)
     return f"""\
 <?xml version="1.0"?>
@@ -612,11 +623,7 @@ def export_rig(
     list of Path
         The files written.
     """
-    from nbcalib.io._files import write_text_atomic
-
-    unknown = [f for f in formats if f not in FORMATS]
-    if unknown or not formats:
-        raise ValueError(f"formats must be a non-empty subset of {FORMATS}, got {formats!r}")
+    _check_formats(formats)
     children, texts, keys = [], {}, set()
     for name in cameras:
         _check_frames(parent_frame, name)
@@ -637,12 +644,5 @@ def export_rig(
         )
     if "urdf" in formats:
         texts["lidar_cameras.urdf"] = rig_urdf_text(children, parent_frame=parent_frame, stage=key)
-    out = Path(workdir) / "export" if out_dir is None else Path(out_dir)
-    if out.exists() and not out.is_dir():
-        raise InputError("exists and is not a folder", out)
-    written = []
-    for name, text in sorted(texts.items(), key=lambda item: ("/" in item[0], item[0])):
-        (out / name).parent.mkdir(parents=True, exist_ok=True)
-        write_text_atomic(out / name, text)
-        written.append(out / name)
-    return written
+    ordered = sorted(texts.items(), key=lambda item: ("/" in item[0], item[0]))
+    return _write_texts(workdir, out_dir, dict(ordered))

@@ -15,18 +15,9 @@ import time
 from pathlib import Path
 
 from nbcalib.io._files import write_text_atomic
+from nbcalib.report.html import _STYLE  # one look for the job's page and each camera's
 
 __all__ = ["write_rig_report"]
-
-_STYLE = """
-body { font-family: sans-serif; margin: 2em; max-width: 1200px; color: #222; }
-table { border-collapse: collapse; margin: 0.5em 0 1.5em; }
-td, th { border: 1px solid #ccc; padding: 0.25em 0.6em; text-align: right; }
-th { background: #f3f3f3; } code { font-size: 0.95em; }
-img { max-width: 100%; border: 1px solid #ddd; margin: 0.3em 0; }
-.ok { color: #1a7f37; } .suspect { color: #b35900; } .failed { color: #c62828; }
-.note { color: #666; font-size: 0.9em; }
-"""
 
 
 def _values(values) -> str:
