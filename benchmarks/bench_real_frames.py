@@ -20,9 +20,9 @@ recording) and from each start:
 A row: the guess's and the result's error against the reference (camera centre cm / degrees),
 the verdict (a refused guess is written afterwards with ``initial-guess --force`` to learn its
 error, shown in brackets), the seconds of each stage as ``run`` records them in ``calib.json``
-and the wall time of the command. A run that exits with an error is a row with its last line. With starts
-``1:5`` and ``3:20`` both measured, the basin line says how many ``3:20`` runs end within
-0.1 deg / 1 cm of the ``1:5`` run of the same direction.
+and the wall time of the command. A run that exits with an error is a row with its last line.
+With starts ``1:5`` and ``3:20`` both measured, the basin line says how many ``3:20`` runs end
+within 0.1 deg / 1 cm of the ``1:5`` run of the same direction.
 
 Run one at a time on an idle machine, warm numba cache:
 
