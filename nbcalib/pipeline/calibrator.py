@@ -1,61 +1,34 @@
-"""The calibration pipeline: one job, stage by stage, in the order of the paper's method section.
+"""The calibration job: its stages in the order of the paper's method, and its products.
 
-:class:`Calibrator` is the only orchestrator: ``nbcalib run``, ``nbcalib demo``, every stage
-command (``nbcalib preprocess``, ``find-matches``, ``initial-guess``, ``calibrate``,
-``report``) and :func:`nbcalib.calibrate` are thin shells over it, so a job gives the same
-result whichever door it comes in by. Its :meth:`~Calibrator.run` reads like the method::
-
-    preprocess    III-C  scans -> dense cloud per pair; equalised intensities and image
-    render        III-D  a virtual camera renders each cloud: LiDAR intensity image + index map
-    match         III-D  camera image x camera-shaped LiDAR views -> 2D-3D correspondences
-    initial guess III-D  rotation-only RANSAC + Cauchy-robust LM -> initial T_camera_lidar
-    refine        III-E  hidden-point removal + NID minimisation over all pairs -> T_camera_lidar
-    assess               NID curves, uncertainty and a verdict (the quality report)
-
-Each step hands a typed product to the next (:mod:`nbcalib.products`). With a work directory
-(:mod:`nbcalib.workdir`) every product is also saved, with a record of what made it (the config
-sections and inputs it used); a later run keeps each product whose record matches, and redoes
-the rest and everything after it. Without one the job runs in memory. Both compute the same
-numbers: products are exactly what the files hold (:mod:`nbcalib.products`).
-
-Example
--------
->>> from nbcalib.pipeline import Calibrator
->>> from nbcalib.preprocess.inputs import InputSpec
->>> spec = InputSpec(inputs=("scan.pcd", "image.png"), camera="camera.yaml")  # doctest: +SKIP
->>> result = Calibrator(workdir="work").run(spec)                             # doctest: +SKIP
->>> result.T_lidar_camera, result.quality.verdict                             # doctest: +SKIP
+:class:`Calibrator` is the orchestrator the command line, the demo and :func:`nbcalib.calibrate`
+share (:mod:`nbcalib.pipeline`). Its matching and initial-guess stages are in
+:mod:`nbcalib.pipeline.guess`, its records and start poses in :mod:`nbcalib.pipeline.records`.
 """
 
 from __future__ import annotations
 
-import json
 import logging
 import time
 
 import numpy as np
 
 from nbcalib._threads import thread_map
-from nbcalib.config import CalibrationConfig, config_to_dict, write_config
+from nbcalib.config import CalibrationConfig
 from nbcalib.errors import InputError
-from nbcalib.io.calib_json import AUTO_STAGE, FINAL_STAGE, MANUAL_STAGE
-from nbcalib.io.job_record import CalibrationRecord, GuessFigures, PreprocessSummary, RunOptions
+from nbcalib.io.calib_json import FINAL_STAGE
+from nbcalib.io.job_record import CalibrationRecord, PreprocessSummary, RunOptions
+from nbcalib.pipeline.guess import GuessSteps
+from nbcalib.pipeline.records import JobRecords, _detail, _uncertainty_record
 from nbcalib.products import CalibrationResult, Start, as_stored_values
-from nbcalib.resume import STAGES, plan_stages
+from nbcalib.resume import plan_stages
 from nbcalib.workdir import WorkDir
 
-__all__ = ["STAGES", "Calibrator"]
-
+__all__ = ["Calibrator"]
 
 log = logging.getLogger("nbcalib.pipeline")
 
 
-def _plain(value):
-    """JSON-comparable copy (tuples to lists, paths to str)."""
-    return json.loads(json.dumps(value, default=str))
-
-
-class Calibrator:
+class Calibrator(GuessSteps, JobRecords):
     """One calibration job (module docstring).
 
     Parameters
@@ -192,23 +165,6 @@ class Calibrator:
                 log.info("    %s done in %.1f s", stage, self.seconds[stage])
         return self.result()
 
-    def _use_fallback(self, exc: InputError) -> None:
-        """The automatic guess failed: record it, and start from the fallback pose instead."""
-        # the guess's own reason when there is one (the error adds what to do next)
-        failed = self.guess is not None and not self.guess.success
-        reason = self.guess.failure if failed else str(exc)
-        log.warning(
-            "automatic initial guess failed (%s): calibrating from %s instead",
-            reason,
-            self._fallback.source,
-        )
-        self._guess_failed = True
-        self._forget_after("initial-guess")
-        calib = self._calib()
-        if calib is not None:
-            calib.record.guess().failed = reason
-        self._remember("initial-guess", calib)
-
     def _run_stage(self, stage: str) -> None:
         if stage == "preprocess":
             # III-C: scans -> dense cloud per pair; equalised intensities and image
@@ -277,139 +233,6 @@ class Calibrator:
         )
         calib.record.inputs = self._inputs_record
         self._remember("preprocess", calib)
-
-    def _match(self) -> None:
-        from nbcalib.matching.find import agreeing_pairs, find_correspondences, unmatched_pair
-
-        camera, cfg = self._camera(), self.config
-        prior = self._prior.T_camera_lidar if self._prior is not None else None
-        self.matches = {}
-        pairs = self._pairs()
-        # many pairs: match them in turn until a few agree on the pose (matching.guess_pairs)
-        subset = cfg.matching.guess_pairs if 0 < cfg.matching.guess_pairs < len(pairs) else 0
-        agreed = skipped = None
-        for k, pair in enumerate(pairs):
-            if agreed is not None:
-                if skipped is None:  # the matched pairs' matcher and why the rest are not
-                    skipped = (
-                        self._matcher_name(),
-                        f"{len(agreed)} matched pairs already agree on the pose "
-                        f"(matching.guess_pairs {subset}; --guess-pairs 0 matches every pair)",
-                    )
-                found = unmatched_pair(pair, *skipped)
-                self.matches[pair.name] = found
-                if self.work is not None:
-                    self.work.write_matches(found, pair, draw=False)
-                continue
-            log.info("    [%d/%d] %s", k + 1, len(pairs), pair.name)
-            found = find_correspondences(
-                camera,
-                pair,
-                cfg.matching,
-                guess_config=cfg.initial_guess,
-                virtual_camera=self._virtual(),
-                T_camera_lidar_prior=prior,
-                seed=cfg.seed,
-                model_dir=self.model_dir,
-                progress=True,
-            )
-            _detail(found.summary())
-            self.matches[pair.name] = found
-            if self.work is not None:
-                self.work.write_matches(found, pair, draw=cfg.matching.draw)
-            if subset:
-                agreed = agreeing_pairs(
-                    list(self.matches.values()), subset, cfg.matching.pool_angle_deg
-                )
-                if agreed is not None and k + 1 < len(pairs):
-                    log.info(
-                        "    %d pairs agree on the pose (%s): the other %d are not matched "
-                        "(--guess-pairs 0 matches every pair)",
-                        len(agreed),
-                        ", ".join(pairs[i].name for i in agreed),
-                        len(pairs) - k - 1,
-                    )
-        self._forget_after("find-matches")
-        self._remember("find-matches", self._calib())
-
-    def _initial_guess(self) -> None:
-        from nbcalib.initial_guess.estimate import MIN_CORRESPONDENCES, estimate_initial_guess
-
-        cfg = self.config.initial_guess
-        corr, stage, where = self._guess_correspondences()
-        manual = self._manual is not None
-        if len(corr) < MIN_CORRESPONDENCES:
-            hint = (
-                "add more picks"
-                if manual
-                else "check the matches (nbcalib find-matches) or pick correspondences by hand "
-                "with --manual"
-            )
-            raise InputError(
-                f"too few correspondences: {len(corr)} (need at least {MIN_CORRESPONDENCES}); "
-                f"{hint}",
-                where,
-            )
-        guess = estimate_initial_guess(
-            self._camera(),
-            corr.uv_camera,
-            corr.points_lidar,
-            cfg,
-            seed=self.config.seed,
-            weights=corr.weights if cfg.confidence_weights else None,
-            min_inliers=cfg.min_manual_inliers if manual else cfg.min_inliers,
-            # a few picks make wide bounds, without the shared error of learned matches
-            precision_scale=0.0 if manual else cfg.precision_scale,
-        )
-        self.guess, self._guess_corr = guess, corr
-        _detail(guess.summary())
-        matcher = None if manual else self._matcher_name()
-        source = f"hand-picked correspondences ({self._manual})" if manual else f"{matcher} matches"
-        if not guess.success and not self._accept_failed_guess:
-            if manual:
-                raise InputError(
-                    f"initial guess not written: {guess.failure} (--force writes it anyway)", where
-                )
-            raise InputError(
-                f"initial guess not written: {guess.failure}; the {source} found no pose the "
-                "camera and the LiDAR agree on (see *_matches.png). Next: a rough extrinsic "
-                "with --init X,Y,Z,QX,QY,QZ,QW [--init-uncertainty M DEG], hand-picked "
-                "correspondences with --manual FILE, or a rough orientation for matching with "
-                "--prior X,Y,Z,QX,QY,QZ,QW",
-                where,
-            )
-        log.info(
-            "    initial guess from %s: %d of %d correspondences agree (RMS %.2f px), %.1fx "
-            "the best other rotation: %s",
-            source,
-            guess.n_inliers,
-            guess.n_correspondences,
-            guess.rms_px,
-            guess.distinctiveness,
-            "looks right" if guess.success else "FAILED its test, kept as asked",
-        )
-        self.start = Start.from_matrix(guess.T_camera_lidar, stage)
-        self._forget_after("initial-guess")
-        calib = self._calib()
-        if calib is not None:
-            calib.set_T_camera_lidar(stage, self.start.T_camera_lidar)
-            calib.record.guess().stages[stage] = GuessFigures.make(
-                correspondences=len(corr),
-                ransac_inliers=guess.ransac.n_inliers,
-                inliers=guess.n_inliers,
-                rms_px=None if not np.isfinite(guess.rms_px) else round(guess.rms_px, 4),
-                support=guess.support,
-                runner_up=guess.runner_up,
-                runner_up_shared=guess.runner_up_shared,
-                bound_m=_rounded(guess.bound_m, 5),
-                bound_deg=_rounded(guess.bound_deg, 4),
-                success=bool(guess.success),
-                seed=self.config.seed,
-                confidence_weights=bool(cfg.confidence_weights and corr.confidence is not None),
-                source=str(self._manual) if manual else "matches",
-                matcher=matcher,
-            )
-        self._remember("initial-guess", calib)
 
     def _refine(self) -> None:
         from nbcalib.registration.refine import refine
@@ -594,23 +417,6 @@ class Calibrator:
             info.start_uncertainty = _uncertainty_record(start.uncertainty)
         self._remember("report", calib)
 
-    def _report_start(self) -> Start | None:
-        """The start the report judges the move from, with the uncertainty stated for it now.
-
-        The start of the result (:meth:`_start_pose`); when this run was given that same pose
-        (as the start or the fallback), the uncertainty stated with it now replaces the
-        recorded one, so that restating it redoes the report, not fine registration.
-        """
-        from dataclasses import replace
-
-        start = self._start_pose(required=False)
-        if start is None:
-            return None
-        for mine in (self._given, self._fallback):
-            if mine is not None and tuple(mine.values) == tuple(start.values):
-                return replace(start, uncertainty=mine.uncertainty)
-        return start
-
     # ================================================================ products
     def result(self) -> CalibrationResult | None:
         """The job's result so far (None before fine registration has run or been loaded)."""
@@ -706,85 +512,6 @@ class Calibrator:
             self._registration = (key, made)
         return self._registration[1]
 
-    def _guess_correspondences(self):
-        """(pooled correspondences, calib.json stage, path for messages) for the initial guess."""
-        from nbcalib.matching.correspondences import pool_correspondences
-
-        search_radius = self.config.matching.search_radius
-        if self._manual is not None:
-            from nbcalib.initial_guess.manual import (
-                read_manual_correspondences,
-                resolve_manual_correspondences,
-            )
-
-            entries = read_manual_correspondences(self._manual)
-            corr = resolve_manual_correspondences(
-                entries, self._pairs(), search_radius=search_radius, path=self._manual
-            )
-            _detail(f"{len(corr)} manual correspondences from {self._manual}")
-            self._guess_parts = [corr]
-            return corr, MANUAL_STAGE, self._manual
-        parts = []
-        for pair in self._pairs():
-            if pair.name in self.matches:
-                part = self.matches[pair.name].correspondences
-            else:
-                part = self.work.read_correspondences(pair, search_radius=search_radius)
-            log.debug(
-                "    %s: %d matches, %d 2D-3D correspondences", pair.name, part.n_matches, len(part)
-            )
-            parts.append(part)
-        where = self.work.path if self.work is not None else None
-        self._guess_parts = parts
-        return pool_correspondences(parts), AUTO_STAGE, where
-
-    def _matcher_name(self) -> str:
-        """Which matcher made the correspondences ("xfeat-lighterglue"; "keypoint" if unknown)."""
-        names = {m.matcher for m in self.matches.values()} if self.matches else set()
-        if not names and self.work is not None:
-            for pair in self._pairs():
-                try:
-                    doc = json.loads(self.work.correspondences_path(pair.name).read_text())
-                except (OSError, ValueError):
-                    continue
-                if isinstance(doc, dict) and isinstance(doc.get("matcher"), str):
-                    names.add(doc["matcher"])
-        return " + ".join(sorted(names)) or "keypoint"
-
-    def _start_pose(self, *, required: bool = True) -> Start | None:
-        """Where fine registration starts (or started), in this order of precedence.
-
-        A pose given as the start; this run's guess; the fallback pose when the guess failed;
-        the start a finished result records; the latest guess in ``calib.json``.
-        """
-        if self._given is not None:
-            return self._given
-        if self.start is not None:
-            return self.start
-        if self._guess_failed and self._fallback is not None:
-            return self._fallback
-        calib = self._calib()
-        if calib is not None:
-            info = calib.record.calibration or CalibrationRecord()
-            stored = info.start_T_lidar_camera
-            if calib.has_result(FINAL_STAGE) and stored is not None and len(stored) == 7:
-                return Start.from_values(
-                    stored,
-                    info.start if info.start is not None else "start",
-                    _uncertainty_from_record(info.start_uncertainty),
-                )
-            stage = calib.latest_initial_stage()
-            if stage is not None:
-                return Start.from_matrix(calib.get_T_camera_lidar(stage), stage)
-        if self._fallback is not None:
-            return self._fallback
-        if not required:
-            return None
-        raise InputError(
-            "no initial guess in calib.json: run nbcalib initial-guess first, or pass --init",
-            None if self.work is None else self.work.calib_path,
-        )
-
     def _result_pose(self) -> np.ndarray:
         if self.refinement is not None or self._adopted is not None:
             return self.T_result
@@ -795,112 +522,3 @@ class Calibrator:
                 self.work.calib_path,
             )
         return calib.get_T_camera_lidar(FINAL_STAGE)
-
-    # ================================================================ records
-    def recipe(self, stage: str) -> dict:
-        """What ``stage``'s product depends on: the config sections and inputs it uses."""
-        c = config_to_dict(self.config)
-        if stage == "preprocess":
-            inputs = None if self._inputs is None else self._inputs.to_dict()
-            return _plain({"inputs": inputs, "preprocess": c["preprocess"]})
-        if stage == "find-matches":
-            from nbcalib.matching.match import resolve_matcher
-
-            return _plain(
-                {
-                    "matching": c["matching"],
-                    "matcher": resolve_matcher(self.config.matching.matcher, self.model_dir),
-                    "ransac_threshold": self.config.initial_guess.ransac_threshold,
-                    "seed": c["seed"],
-                    "prior": None if self._prior is None else self._prior.values,
-                }
-            )
-        if stage == "initial-guess":
-            manual = None if self._manual is None else str(self._manual)
-            return _plain(
-                {"initial_guess": c["initial_guess"], "seed": c["seed"], "manual": manual}
-            )
-        if stage == "calibrate":
-            given = None if self._given is None else self._given.values
-            recipe = {"refine": c["refine"], "start": given}
-            if self.rig_pairs:  # the other cameras' pairs and where the rig puts them
-                recipe["rig_pairs"] = {
-                    p.name: as_stored_values(p.T_camera_rig) for p in self.rig_pairs
-                }
-            if self._adopted is not None:
-                recipe["adopted"] = {"T_lidar_camera": self._adopted[0], "from": self._adopted[1]}
-            return _plain(recipe)
-        start = self._report_start()
-        stated = None if start is None else start.uncertainty
-        return _plain({"assess": c["assess"], "refine": c["refine"], "start_uncertainty": stated})
-
-    def _remember(self, stage: str, calib=None) -> None:
-        """Record what made ``stage``'s product (in memory, and in calib.json when given)."""
-        recipe = self.recipe(stage)
-        self._made[stage] = recipe
-        if calib is None:
-            return
-        record = calib.record
-        record.set_made(stage, recipe, round(time.perf_counter() - self._stage_t0, 3))
-        record.config = config_to_dict(self.config)
-        if self._inputs_record is not None:
-            record.inputs = self._inputs_record
-        if self.run_options is not None:
-            record.run = RunOptions.from_dict(_plain(self.run_options.to_dict()))
-        self.work.write_calib(calib)
-        write_config(self.work.config_path, self.config, {"inputs": record.inputs})
-
-    def _forget_after(self, stage: str) -> None:
-        """A stage ran: what later stages made from its old product no longer holds.
-
-        Their records go, and in the work directory their results too (an automatic guess
-        from old matches, a result from an old guess), with the report and exports: nothing
-        stale is left that looks finished.
-        """
-        later = STAGES[STAGES.index(stage) + 1 :]
-        for name in later:
-            self._made.pop(name, None)
-        calib = self._calib() if self.work is not None and self.work.is_complete() else None
-        if calib is None or stage == "report":
-            return
-        self.work.remove_derived()
-        for name in later:
-            calib.record.forget_made(name)
-        stale = {"find-matches": (AUTO_STAGE, FINAL_STAGE), "initial-guess": (FINAL_STAGE,)}
-        for result in stale.get(stage, ()):
-            calib.results.pop(result, None)
-            calib.record.unstamp(result)
-        if stage in ("find-matches", "initial-guess"):
-            if calib.record.initial_guess is not None:
-                calib.record.initial_guess.failed = None
-            calib.record.calibration = None
-        calib.record.quality = None
-        self.work.write_calib(calib)
-
-
-def _detail(line: str) -> None:
-    log.info("    %s", line)
-
-
-def _rounded(value: float, digits: int) -> float | None:
-    """``value`` rounded for calib.json, None when not finite (JSON has no inf)."""
-    return round(float(value), digits) if np.isfinite(value) else None
-
-
-def _uncertainty_record(uncertainty) -> dict | None:
-    """A start's stated uncertainty as ``calib.json`` records it (None: not stated)."""
-    if uncertainty is None:
-        return None
-    return {"translation_m": float(uncertainty[0]), "rotation_deg": float(uncertainty[1])}
-
-
-def _uncertainty_from_record(record) -> tuple[float, float] | None:
-    """The stated uncertainty a record holds, or None (not stated, or not readable)."""
-    from nbcalib.products import check_uncertainty
-
-    if not isinstance(record, dict):
-        return None
-    try:
-        return check_uncertainty((record.get("translation_m"), record.get("rotation_deg")))
-    except ValueError:
-        return None
