@@ -9,6 +9,8 @@ The correspondences come from matching (:mod:`nbcalib.matching`) or from hand-pi
   reprojection error (Eq. 1), analytic Jacobians;
 - :mod:`~nbcalib.initial_guess.estimate`: both together, a polish of the winner (translation
   RANSAC, inlier refits), with inliers, RMS and a success flag;
+- :mod:`~nbcalib.initial_guess.success`: the guess and its success test (inliers, rival poses,
+  precision); :mod:`~nbcalib.initial_guess.translation`: translations for a known rotation;
 - :mod:`~nbcalib.initial_guess.manual` and :mod:`~nbcalib.initial_guess.picker`: hand-picked
   correspondences (file format, interactive picker);
 - :mod:`~nbcalib.initial_guess.synthetic`: correspondences with known answer.
