@@ -55,7 +55,9 @@ class VirtualCamera:
     camera : CameraModel
         Pinhole for a LiDAR field of view under 150 degrees, else equirectangular.
     T_vcam_lidar : ndarray of shape (4, 4), float64
-        ``p_vcam = T_vcam_lidar @ p_lidar`` (a rotation only).
+        ``p_vcam = T_vcam_lidar @ p_lidar``: a rotation, placed at the LiDAR's origin in the
+        clouds' frame (:mod:`nbcalib.preprocess.origin`; the clouds' own origin unless they are
+        in a frame not centred on the sensor).
     fov_deg : float or None
         The LiDAR field of view it was chosen for, degrees (None when loaded from a work
         directory that does not record it).
@@ -64,6 +66,12 @@ class VirtualCamera:
     camera: CameraModel
     T_vcam_lidar: np.ndarray
     fov_deg: float | None = None
+
+    @property
+    def origin(self) -> np.ndarray:
+        """The LiDAR's position in the clouds' frame, where the virtual camera sits, metres."""
+        T = np.asarray(self.T_vcam_lidar, dtype=np.float64)
+        return -T[:3, :3].T @ T[:3, 3]
 
 
 @dataclass(frozen=True, eq=False)

@@ -162,6 +162,10 @@ PREPROCESS = (
            "time of an image without a time as a fraction of its own scan's sweep (0.5: KITTI, "
            "a camera triggered when the LiDAR faces forward)", "F"),
     Option("--no-equalize", "preprocess.equalize", "keep raw intensities and image", value=False),
+    Option("--lidar-origin", "preprocess.lidar_origin",
+           "where the LiDAR sits in its clouds' frame, metres ('auto': found from a spinning "
+           "scan's rings when the clouds are in a vehicle frame; 'cloud': their origin), for "
+           "rendering and matching", "X,Y,Z"),
 )  # fmt: skip
 
 MATCHING = (

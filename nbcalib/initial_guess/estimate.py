@@ -183,6 +183,7 @@ def estimate_initial_guess(
     *,
     seed: int = 0,
     weights=None,
+    origin=None,
     **overrides,
 ) -> InitialGuess:
     """Estimate ``T_camera_lidar`` from 2D-3D correspondences (paper section III-D).
@@ -217,6 +218,11 @@ def estimate_initial_guess(
         the matcher's confidences (the correct fraction of learned matches rises steeply with
         their confidence; docs/BENCHMARKS.md). Default: all 1, paper Eq. 1. RANSAC and the
         inlier counts do not use them.
+    origin : array_like of shape (3,), optional
+        Where the LiDAR sits in the points' frame (:mod:`nbcalib.preprocess.origin`; default:
+        at their origin). Rotation-only RANSAC takes the camera to be there (its bearings are
+        the points' directions from it), and so do the start translations; the result is in
+        the points' frame.
     **overrides
         Attributes of :class:`InitialGuessConfig` to change for this call
         (``ransac_iterations=2000``, ``polish=False``, ...).
@@ -231,10 +237,15 @@ def estimate_initial_guess(
         Fewer than :data:`MIN_CORRESPONDENCES` usable correspondences.
     """
     cfg = replace(config or InitialGuessConfig(), **overrides)
-    key = _memo_key(camera, uv_camera, points_lidar, cfg, seed, weights)
+    if origin is not None:
+        origin = np.asarray(origin, dtype=np.float64)
+        if origin.shape != (3,) or not np.all(np.isfinite(origin)):
+            raise ValueError(f"origin must be 3 finite numbers, got {origin!r}")
+        origin = origin if origin.any() else None  # the points' own origin: as without one
+    key = _memo_key(camera, uv_camera, points_lidar, cfg, seed, weights, origin)
     if key is not None and key in _MEMO:
         return _MEMO[key]
-    guess = _estimate(camera, uv_camera, points_lidar, cfg, seed, weights)
+    guess = _estimate(camera, uv_camera, points_lidar, cfg, seed, weights, origin)
     if key is not None:
         _MEMO[key] = guess
         while len(_MEMO) > _MEMO_SIZE:
@@ -249,7 +260,7 @@ _MEMO: dict = {}
 _MEMO_SIZE = 4
 
 
-def _memo_key(camera, uv_camera, points_lidar, cfg, seed, weights) -> tuple | None:
+def _memo_key(camera, uv_camera, points_lidar, cfg, seed, weights, origin=None) -> tuple | None:
     """A digest of every input of an estimate (None when an input is not an array of numbers)."""
     import hashlib
 
@@ -264,14 +275,17 @@ def _memo_key(camera, uv_camera, points_lidar, cfg, seed, weights) -> tuple | No
     for a in arrays:
         digest.update(repr(a.shape).encode())
         digest.update(a.tobytes())
-    return (camera, cfg, int(seed), weights is None, digest.hexdigest())
+    where = None if origin is None else tuple(float(v) for v in origin)
+    return (camera, cfg, int(seed), weights is None, where, digest.hexdigest())
 
 
-def _estimate(camera, uv_camera, points_lidar, cfg, seed, weights) -> InitialGuess:
+def _estimate(camera, uv_camera, points_lidar, cfg, seed, weights, origin=None) -> InitialGuess:
     """:func:`estimate_initial_guess` with its settings resolved (no memo)."""
     min_inliers = operator.index(cfg.min_inliers)
     ransac_threshold = cfg.ransac_threshold
-    bearings_camera, _, usable = usable_correspondences(camera, uv_camera, points_lidar)
+    # rotation-only RANSAC sees the points from the LiDAR (the camera is taken to be there)
+    seen = points_lidar if origin is None else np.asarray(points_lidar, dtype=np.float64) - origin
+    bearings_camera, _, usable = usable_correspondences(camera, uv_camera, seen)
     n_usable = int(np.count_nonzero(usable))
     if n_usable < MIN_CORRESPONDENCES:
         raise InputError(
@@ -288,7 +302,7 @@ def _estimate(camera, uv_camera, points_lidar, cfg, seed, weights) -> InitialGue
     ransac = estimate_rotation_ransac(
         camera,
         uv,
-        points,
+        points if origin is None else points - origin,
         iterations=cfg.ransac_iterations,
         threshold=ransac_threshold,
         seed=seed,
@@ -314,6 +328,7 @@ def _estimate(camera, uv_camera, points_lidar, cfg, seed, weights) -> InitialGue
             local_optimization=cfg.local_optimization,
             max_lm_iterations=cfg.max_lm_iterations,
             weights=weights[usable],
+            origin=origin,
         )
         key = (int(np.count_nonzero(result.errors < ransac_threshold)), -result.cost)
         if best is None or key > best[0]:
@@ -338,6 +353,7 @@ def _estimate(camera, uv_camera, points_lidar, cfg, seed, weights) -> InitialGue
             width=cfg.polish_kernel_width,
             seed=seed,
             iterations=cfg.translation_iterations,
+            origin=origin,
         )
         errors[usable] = reprojection_errors(camera, T_final, uv_u, points_u)[0]
     inliers = errors < ransac_threshold
@@ -358,6 +374,7 @@ def _estimate(camera, uv_camera, points_lidar, cfg, seed, weights) -> InitialGue
             threshold=ransac_threshold,
             seed=seed,
             iterations=cfg.translation_iterations,
+            origin=origin,
         )
     bound_m, bound_deg = pose_uncertainty(camera, T_final, uv[inliers], points[inliers])
     guess = InitialGuess(

@@ -242,6 +242,7 @@ def _runner_up(
     threshold,
     seed,
     iterations,
+    origin=None,
 ) -> tuple[int, int]:
     """Most correspondences a pose rotated more than ``DISTINCT_ROTATION_DEG`` away explains.
 
@@ -259,7 +260,15 @@ def _runner_up(
     n_free = int(np.count_nonzero(free))
     for _, _, R in others:
         _, n = translation_ransac(
-            camera, R, uv, points, bearings, threshold=threshold, iterations=iterations, seed=seed
+            camera,
+            R,
+            uv,
+            points,
+            bearings,
+            threshold=threshold,
+            iterations=iterations,
+            seed=seed,
+            origin=origin,
         )
         shared = max(shared, n)
         if n_free >= 2:
@@ -272,6 +281,7 @@ def _runner_up(
                 threshold=threshold,
                 iterations=iterations,
                 seed=seed,
+                origin=origin,
             )
         else:
             n = n_free

@@ -477,21 +477,36 @@ class PreprocessSummary:
         where the pair sits in its recording), by pair name.
     lidar_fov_deg : float or None
         The LiDAR's horizontal field of view the virtual camera was chosen for.
+    lidar_origin : dict or None
+        Where the LiDAR sits in the clouds' frame and how that was decided
+        (:class:`nbcalib.preprocess.origin.LidarOrigin`: ``xyz``, ``source``, ``detail``).
     """
 
     pairs: dict = field(default_factory=dict)
     lidar_fov_deg: float | None = None
     other: dict = field(default_factory=dict)
+    lidar_origin: dict | None = None
 
     @classmethod
     def from_dict(cls, data: dict) -> PreprocessSummary:
         """The record of a parsed ``nbcalib.preprocess``."""
-        known, other = _split(data, {"pairs": _is_dict, "lidar_fov_deg": _is_number})
-        return cls(known.get("pairs", {}), known.get("lidar_fov_deg"), other)
+        known, other = _split(
+            data, {"pairs": _is_dict, "lidar_fov_deg": _is_number, "lidar_origin": _is_dict}
+        )
+        return cls(
+            known.get("pairs", {}), known.get("lidar_fov_deg"), other, known.get("lidar_origin")
+        )
 
     def to_dict(self) -> dict:
         """The ``nbcalib.preprocess`` to write."""
-        return _join(self.other, {"pairs": self.pairs, "lidar_fov_deg": self.lidar_fov_deg})
+        return _join(
+            self.other,
+            {
+                "pairs": self.pairs,
+                "lidar_fov_deg": self.lidar_fov_deg,
+                "lidar_origin": self.lidar_origin,
+            },
+        )
 
 
 @dataclass

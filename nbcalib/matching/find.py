@@ -194,7 +194,9 @@ def find_correspondences(
         match_views`).
     virtual_camera : VirtualCamera, optional
         The camera of the stored LiDAR image: with ``views == 0`` its resolution sets the
-        camera image's scale (else ``config.camera_scale``, else 1, with a warning).
+        camera image's scale (else ``config.camera_scale``, else 1, with a warning); its
+        position is the LiDAR's origin, from which the views are rendered
+        (:attr:`nbcalib.products.VirtualCamera.origin`).
     T_camera_lidar_prior : array_like of shape (4, 4), optional
         A rough extrinsic: views around it instead of the heading sweep.
     seed : int, optional
@@ -215,6 +217,7 @@ def find_correspondences(
     cfg = config or MatchConfig()
     t0 = time.perf_counter()
     matcher = resolve_matcher(cfg.matcher, model_dir)
+    origin = None if virtual_camera is None else virtual_camera.origin
     views = None
     attempts = []
     if cfg.views > 0 or T_camera_lidar_prior is not None:
@@ -251,8 +254,11 @@ def find_correspondences(
                     name=pair.name,
                     model_dir=model_dir,
                     progress=view_done,
+                    origin=origin,
                 )
-                ok, support, R = _guess_passes(camera, found.correspondences, guess_config, seed)
+                ok, support, R = _guess_passes(
+                    camera, found.correspondences, guess_config, seed, origin
+                )
                 rotations.append(R if ok else None)
                 attempts.append(
                     {
@@ -359,7 +365,7 @@ def agreeing_pairs(found, count: int, angle_deg: float) -> list[int] | None:
     return best if count > 0 and len(best) >= count else None
 
 
-def _guess_passes(camera, corr: Correspondences, guess_config, seed: int):
+def _guess_passes(camera, corr: Correspondences, guess_config, seed: int, origin=None):
     """(found the pose, support, R_camera_lidar) of the initial guess from one pair's matches."""
     from nbcalib.initial_guess.config import InitialGuessConfig
     from nbcalib.initial_guess.estimate import MIN_CORRESPONDENCES, estimate_initial_guess
@@ -374,6 +380,7 @@ def _guess_passes(camera, corr: Correspondences, guess_config, seed: int):
         cfg,
         seed=seed,
         weights=corr.weights if cfg.confidence_weights else None,
+        origin=origin,
     )
     # did this attempt find the pose? (precision is the initial-guess stage's test)
     return bool(guess.found), int(guess.support), guess.T_camera_lidar[:3, :3].copy()

@@ -133,11 +133,13 @@ def _view_matches(
     *,
     screen=False,
     cache=None,
+    origin=None,
 ) -> ViewMatches:
     """Match one view, lift its keypoints, count its rotation-only RANSAC support.
 
     ``screen``: by the descriptors' mutual nearest neighbours (:func:`~nbcalib.matching.match.
-    match_images`); ``cache``: the camera image's features, shared by the views.
+    match_images`); ``cache``: the camera image's features, shared by the views; ``origin``:
+    the LiDAR's position in the cloud's frame, where RANSAC takes the camera to be.
     """
     from nbcalib.errors import InputError
     from nbcalib.initial_guess.ransac import estimate_rotation_ransac
@@ -163,7 +165,7 @@ def _view_matches(
             ransac = estimate_rotation_ransac(
                 camera,
                 corr.uv_camera,
-                corr.points_lidar,
+                corr.points_lidar if origin is None else corr.points_lidar - origin,
                 iterations=config.view_ransac_iterations,
                 threshold=ransac_threshold,
                 seed=seed,
@@ -212,18 +214,25 @@ def _agreeing(results: list[ViewMatches], first: int, cfg: MatchConfig) -> list[
     ]
 
 
-def _refined_view(camera, corr, guess_config, seed, render, match) -> ViewMatches | None:
+def _refined_view(camera, corr, guess_config, seed, render, match, origin=None):
     """One more view rendered from the pose the kept correspondences give (None if none).
 
     ``render(R_vcam_lidar, t_vcam_lidar)`` and ``match(view, fine)`` are :func:`match_views`'s
     own rendering and matching, with its settings (``fine``: at ``fine_max_keypoints``).
+    Returns a :class:`ViewMatches` or None.
     """
     from nbcalib.errors import InputError
     from nbcalib.initial_guess.estimate import estimate_initial_guess
 
     try:
         guess = estimate_initial_guess(
-            camera, corr.uv_camera, corr.points_lidar, guess_config, weights=corr.weights, seed=seed
+            camera,
+            corr.uv_camera,
+            corr.points_lidar,
+            guess_config,
+            weights=corr.weights,
+            seed=seed,
+            origin=origin,
         )
     except InputError:
         return None
@@ -248,6 +257,7 @@ def match_views(
     name: str = "",
     model_dir: str | os.PathLike | None = None,
     progress=None,
+    origin=None,
     **overrides,
 ) -> MultiViewMatches:
     """Match the camera image with camera-shaped LiDAR views (module docstring).
@@ -282,6 +292,10 @@ def match_views(
     progress : callable, optional
         Called as ``progress(done, total)`` after each heading (rendered, and matched unless
         it shows too little), then after each view the screen sends to the matcher.
+    origin : array_like of shape (3,), optional
+        The LiDAR's position in the cloud's frame (:mod:`nbcalib.preprocess.origin`; default:
+        the cloud's origin): the heading views are rendered from there, and rotation-only
+        RANSAC takes the camera to be there.
     **overrides
         Attributes of :class:`MatchConfig` to change for this call.
 
@@ -325,6 +339,8 @@ def match_views(
     inpaint = 2 * round(cfg.inpaint_deg * view_ppd / 2) + 1 if cfg.inpaint_deg > 0 else 0
     if inpaint:
         search_radius = max(search_radius, inpaint / 2)
+    o = None if origin is None else np.asarray(origin, dtype=np.float64)
+    o = o if o is not None and o.any() else None  # the cloud's own origin: as without one
     translations = None
     if T_camera_lidar_prior is not None:
         T_prior = np.asarray(T_camera_lidar_prior, dtype=np.float64)
@@ -335,6 +351,9 @@ def match_views(
         translations = [T_prior[:3, 3] if off == 0.0 else None for off in cfg.prior_yaw_offsets_deg]
     else:
         rotations = heading_rotations(cfg.views)
+    if o is not None:  # the other views from the LiDAR: p_vcam = R (p - o)
+        translations = translations or [None] * len(rotations)
+        translations = [-R @ o if t is None else t for R, t in zip(rotations, translations)]
 
     def render(R, t=None):
         return render_view(
@@ -368,6 +387,7 @@ def match_views(
             seed,
             screen=screen,
             cache=cache,
+            origin=o,
         )
 
     screen = cfg.screen_views > 0 and len(rotations) > cfg.screen_views and cfg.matcher != "sift"
@@ -398,7 +418,7 @@ def match_views(
         pooled = tuple(keep)
         corr = pool_correspondences([results[k].correspondences for k in keep])
         if cfg.refine_view:
-            extra = _refined_view(camera, corr, guess_config, seed, render, match)
+            extra = _refined_view(camera, corr, guess_config, seed, render, match, o)
             if extra is not None:
                 results.append(extra)
                 pooled = (*pooled, len(results) - 1)

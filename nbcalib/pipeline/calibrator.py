@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import logging
 import time
+from dataclasses import asdict
 
 import numpy as np
 
@@ -64,6 +65,7 @@ class Calibrator(GuessSteps, JobRecords):
         self.skipped: list[str] = []
         self._made: dict[str, dict] = {}
         self._inputs_record = None
+        self._origin = None  # LidarOrigin of preprocessing
         self._inputs = self._manual = self._prior = self._given = self._fallback = None
         self._guess_failed = False
         self._stage_t0 = time.perf_counter()
@@ -186,6 +188,7 @@ class Calibrator(GuessSteps, JobRecords):
 
     # ================================================================ the steps
     def _preprocess(self) -> list:
+        from nbcalib.preprocess.origin import lidar_origin
         from nbcalib.preprocess.prepare import check_pairs, prepare_pair
 
         if self._inputs is None or getattr(self._inputs, "empty", False):
@@ -200,6 +203,9 @@ class Calibrator(GuessSteps, JobRecords):
             self.work.prepare()
         self.camera, self._data_path, self._topics = camera, data_path, pair_inputs[0].topics
         self._inputs_record = self._inputs.to_dict()
+        # where the LiDAR sits in the clouds' frame: views and the LiDAR image are seen from there
+        self._origin = lidar_origin(pair_inputs, self.config.preprocess)
+        _detail(self._origin.describe())
         one = len(pair_inputs) == 1
 
         def prepare(pair):  # pairs on every core (nbcalib._threads); a bar only for one pair
@@ -212,7 +218,7 @@ class Calibrator(GuessSteps, JobRecords):
         from nbcalib.preprocess.prepare import render_pairs
         from nbcalib.workdir import make_calib, set_virtual_camera
 
-        self.virtual, self.pairs = render_pairs(pairs, log=_detail)
+        self.virtual, self.pairs = render_pairs(pairs, origin=self._origin.xyz, log=_detail)
         self._forget_after("preprocess")
         if self.work is None:
             return self._remember("preprocess")
@@ -229,7 +235,9 @@ class Calibrator(GuessSteps, JobRecords):
         )
         set_virtual_camera(calib, self.virtual)
         calib.record.preprocess = PreprocessSummary(
-            {p.name: p.summary for p in self.pairs}, self.virtual.fov_deg
+            {p.name: p.summary for p in self.pairs},
+            self.virtual.fov_deg,
+            lidar_origin=asdict(self._origin),
         )
         calib.record.inputs = self._inputs_record
         self._remember("preprocess", calib)

@@ -127,6 +127,7 @@ class GuessSteps:
             min_inliers=cfg.min_manual_inliers if manual else cfg.min_inliers,
             # a few picks make wide bounds, without the shared error of learned matches
             precision_scale=0.0 if manual else cfg.precision_scale,
+            origin=self._lidar_origin(),
         )
         self.guess, self._guess_corr = guess, corr
         _detail(guess.summary())
@@ -222,3 +223,8 @@ class GuessSteps:
                 if isinstance(doc, dict) and isinstance(doc.get("matcher"), str):
                     names.add(doc["matcher"])
         return " + ".join(sorted(names)) or "keypoint"
+
+    def _lidar_origin(self):
+        """Where the LiDAR sits in the clouds' frame: the virtual camera's position (or None)."""
+        virtual = self._virtual()
+        return None if virtual is None else virtual.origin

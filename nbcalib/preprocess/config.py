@@ -17,10 +17,13 @@ from nbcalib.odometry.config import (
     DynamicIntegrationConfig,
 )
 
-__all__ = ["MODES", "PreprocessConfig"]
+__all__ = ["MODES", "ORIGINS", "PreprocessConfig"]
 
 #: Values of :attr:`PreprocessConfig.mode`.
 MODES = ("auto", "static", "dynamic")
+
+#: Words :attr:`PreprocessConfig.lidar_origin` takes besides three numbers.
+ORIGINS = ("auto", "cloud")
 
 
 @dataclass(frozen=True)
@@ -63,6 +66,13 @@ class PreprocessConfig:
         ``--images`` without ``--image-times``; the dense cloud is expressed in the LiDAR frame at
         that time. 0.5: KITTI, and every camera triggered when a spinning LiDAR whose sweeps
         start behind it faces forward.
+    lidar_origin : str
+        Where the LiDAR sits in its clouds' frame (:mod:`nbcalib.preprocess.origin`):
+        ``"auto"`` finds it from the rings of a spinning scan and moves it only from a frame
+        clearly not centred on the sensor (a vehicle frame), ``"cloud"`` keeps the clouds'
+        origin, ``"X,Y,Z"`` (metres) gives it. The LiDAR image and matching's views are
+        rendered from there, and rotation-only RANSAC takes the camera to be there; the
+        extrinsic stays in the clouds' frame.
     odometry : DynamicIntegrationConfig
         The continuous-time ICP of dynamic integration (:mod:`nbcalib.odometry.config`).
     """
@@ -79,6 +89,7 @@ class PreprocessConfig:
     max_scans: int | None = None
     neighbors: int = 1
     image_scan_fraction: float = 0.5
+    lidar_origin: str = "auto"
     odometry: DynamicIntegrationConfig = field(default_factory=DynamicIntegrationConfig)
 
     def __post_init__(self):
@@ -98,5 +109,22 @@ class PreprocessConfig:
             raise ValueError(
                 f"image_scan_fraction must be in [0, 1], got {self.image_scan_fraction}"
             )
+        self.given_origin()  # raises on a value that is neither a word nor three numbers
         if not self.intensity_channel:
             raise ValueError("intensity_channel must be 'auto' or a field name")
+
+    def given_origin(self) -> tuple[float, float, float] | None:
+        """:attr:`lidar_origin` as three numbers when given as such (else None)."""
+        text = str(self.lidar_origin).strip().lower()
+        if text in ORIGINS:
+            return None
+        try:
+            values = tuple(float(v) for v in text.split(","))
+        except ValueError:
+            values = ()
+        if len(values) != 3 or not all(math.isfinite(v) for v in values):
+            raise ValueError(
+                f"lidar_origin must be {' or '.join(ORIGINS)} or X,Y,Z in metres, "
+                f"got {self.lidar_origin!r}"
+            )
+        return values

@@ -214,6 +214,7 @@ def render_pairs(
     pairs: Sequence[PairData],
     virtual: VirtualCamera | None = None,
     *,
+    origin=None,
     log: Callable[[str], None] | None = None,
 ) -> tuple[VirtualCamera, list[PairData]]:
     """Render every pair's LiDAR image and index map with one virtual camera.
@@ -225,6 +226,10 @@ def render_pairs(
     virtual : VirtualCamera, optional
         The camera to render with; default: chosen from the first pair's LiDAR field of view
         (as the reference: one virtual camera for all pairs).
+    origin : array_like of shape (3,), optional
+        Where the LiDAR sits in the clouds' frame (:mod:`nbcalib.preprocess.origin`): the
+        default camera is placed there and the field of view measured from there (default:
+        the clouds' origin).
     log : callable, optional
         Receives progress lines.
 
@@ -244,8 +249,11 @@ def render_pairs(
     if not pairs:
         raise ValueError("render_pairs needs at least one pair")
     if virtual is None:
-        fov = estimate_lidar_fov(pairs[0].points_lidar)
+        o = np.zeros(3) if origin is None else np.asarray(origin, dtype=np.float64)
+        fov = estimate_lidar_fov(pairs[0].points_lidar - o if o.any() else pairs[0].points_lidar)
         camera, T_vcam_lidar = make_virtual_camera(fov)
+        if o.any():  # the camera at the LiDAR: p_vcam = R (p - o)
+            T_vcam_lidar[:3, 3] = -T_vcam_lidar[:3, :3] @ o
         virtual = VirtualCamera(camera, T_vcam_lidar, math.degrees(fov))
         log(f"LiDAR field of view {virtual.fov_deg:.1f} deg: {camera.model} virtual camera")
 
