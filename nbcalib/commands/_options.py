@@ -194,8 +194,8 @@ MATCHING = (
            "at most N screened views go to the learned matcher, the screen's best (0: no "
            "limit)", "N"),
     Option("--guess-pairs", "matching.guess_pairs",
-           "with more pairs than N, match pairs in turn until N found agreeing poses; the "
-           "rest are not matched (0: match every pair)", "N"),
+           "several pairs: match them in turn until their pooled pose stops moving and N of "
+           "them agree with it; the rest are not matched (0: match every pair)", "N"),
     Option("--search-radius", "matching.search_radius",
            "LiDAR keypoints on empty pixels take the nearest LiDAR point within this radius, "
            "pixels", "PX"),

@@ -199,10 +199,18 @@ class GuessFigures:
         confidence_weights: bool,
         source: str,
         matcher: str | None,
+        precise: bool | None = None,
     ) -> GuessFigures:
-        """The figures of a guess (:class:`nbcalib.initial_guess.estimate.InitialGuess`)."""
+        """The figures of a guess (:class:`nbcalib.initial_guess.estimate.InitialGuess`).
+
+        ``success``: the guess passed its whole test (found and precise); ``precise`` (written
+        when given): its precision part alone. A found guess that is not precise is still
+        refined, and the report judges the result.
+        """
+        extra = {} if precise is None else {"precise": precise}
         return cls(
             {
+                **extra,
                 "correspondences": correspondences,
                 "ransac_inliers": ransac_inliers,
                 "inliers": inliers,

@@ -105,6 +105,12 @@ class MatchConfig:
         data").
     retry_inpaint_deg : float
         ``inpaint_deg`` of the retries.
+    lift_inpainted : bool
+        A keypoint on an inpainted pixel of a view takes the nearest LiDAR point within half
+        the inpainted width (True), or within ``search_radius`` like any other (False: those
+        far from a point are dropped). Half an inpainted width is a degree: the points lifted
+        that far bias a pose pooled over many frames (KITTI odometry: 58 cm / 1.2 deg against
+        13 cm / 0.3 deg; docs/BENCHMARKS.md), so the frames of a recording are lifted tightly.
     fine_max_keypoints : int or None
         ``max_keypoints`` of the finer matching (2048): the refined view (``refine_view``) and
         the retries, so that a faster sweep (``max_keypoints`` 1024) keeps them: the sparse
@@ -123,12 +129,18 @@ class MatchConfig:
     min_pool_support : int
         RANSAC inliers a view needs to be pooled.
     guess_pairs : int
-        A job of more pairs than this matches its pairs in turn until this many have each
-        found a pose with their own matches and agree on its rotation (within
-        ``pool_angle_deg``, the pool's rule); the rest are not matched, and the initial guess
-        is estimated from the matched ones (0: every pair is matched). A pair's matching costs
-        about ten seconds; fifteen pairs' guess needs no more than a few (docs/BENCHMARKS.md,
-        section 10).
+        A job of several pairs (the frames of a recording, :mod:`nbcalib.matching.recording`)
+        matches its frames in turn until the pose pooled from their matches is found, stops
+        moving as frames are added, and this many frames agree with it (``min_pool_support``
+        inliers each); the rest are not matched, and the initial guess is estimated from the
+        matched ones (0: every frame is matched).
+    frames_pixels_per_degree : float
+        When the views as configured let a recording's frames find no pose, they are screened
+        and matched again at this resolution (never above the camera's)...
+    frames_inpaint_deg : float
+        ... with the LiDAR coverage's gaps up to this wide inpainted and keypoints lifted
+        tightly (:func:`~nbcalib.matching.recording.attempt_settings`): the finer views sparse
+        real scans need.
     refine_view : bool
         Estimate the pose from the kept correspondences and, when that succeeds, render and
         match one more view from that pose (no parallax left).
@@ -160,6 +172,7 @@ class MatchConfig:
     inpaint_deg: float = 0.0
     retry_pixels_per_degree: tuple[float, ...] = (10.0, 15.0)
     retry_inpaint_deg: float = 2.0
+    lift_inpainted: bool = True
     fine_max_keypoints: int | None = 2048
     search_radius: float = 2.0
     view_ransac_iterations: int = 2048
@@ -167,6 +180,8 @@ class MatchConfig:
     pool_angle_deg: float = 2.0
     min_pool_support: int = 6
     guess_pairs: int = 2
+    frames_pixels_per_degree: float = 10.0
+    frames_inpaint_deg: float = 2.0
     refine_view: bool = True
     draw: bool = True
 
@@ -225,7 +240,11 @@ class MatchConfig:
             raise ValueError(f"sift_ratio must be in (0, 1], got {self.sift_ratio}")
         if self.view_ransac_iterations < 1 or self.min_pool_support < 1:
             raise ValueError("view_ransac_iterations and min_pool_support must be >= 1")
-        for name in ("inpaint_deg", "retry_inpaint_deg"):
+        if not (math.isfinite(self.frames_pixels_per_degree) and self.frames_pixels_per_degree > 0):
+            raise ValueError(
+                f"frames_pixels_per_degree must be > 0, got {self.frames_pixels_per_degree}"
+            )
+        for name in ("inpaint_deg", "retry_inpaint_deg", "frames_inpaint_deg"):
             value = getattr(self, name)
             if not (math.isfinite(value) and value >= 0):
                 raise ValueError(f"{name} must be a finite number >= 0, got {value}")

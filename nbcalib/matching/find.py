@@ -33,7 +33,6 @@ from nbcalib.matching.matches import Matches
 
 __all__ = [
     "PairMatches",
-    "agreeing_pairs",
     "find_correspondences",
     "reference_matches",
     "unmatched_pair",
@@ -66,9 +65,6 @@ class PairMatches:
         guess passed (``MatchConfig.retry_pixels_per_degree``).
     kept_attempt : int or None
         The attempt whose correspondences were kept.
-    guess_rotation : ndarray of shape (3, 3) or None
-        ``R_camera_lidar`` of the kept attempt's own initial guess when that guess found the
-        pose (``InitialGuess.found``), else None: what :func:`agreeing_pairs` compares.
     """
 
     name: str
@@ -79,7 +75,6 @@ class PairMatches:
     seconds: float = 0.0
     attempts: tuple = ()
     kept_attempt: int | None = None
-    guess_rotation: np.ndarray | None = None
 
     @property
     def matched(self) -> bool:
@@ -232,7 +227,6 @@ def find_correspondences(
             for ppd in cfg.retry_pixels_per_degree
         ]
         best = None
-        rotations = []
         with Progress(label=f"find-matches {pair.name}", enabled=progress) as display:
             for i, attempt in enumerate(settings):
                 offset = display.done
@@ -256,10 +250,9 @@ def find_correspondences(
                     progress=view_done,
                     origin=origin,
                 )
-                ok, support, R = _guess_passes(
+                ok, support = _guess_passes(
                     camera, found.correspondences, guess_config, seed, origin
                 )
-                rotations.append(R if ok else None)
                 attempts.append(
                     {
                         "pixels_per_degree": attempt.pixels_per_degree,
@@ -328,17 +321,16 @@ def find_correspondences(
         seconds,
         tuple(attempts),
         kept,
-        rotations[kept] if kept is not None else None,
     )
 
 
 def unmatched_pair(pair, matcher: str, reason: str) -> PairMatches:
     """The record of a pair that was not matched: no correspondences, ``reason`` in its info.
 
-    A multi-pair job matches its pairs until a few agree (:func:`agreeing_pairs`,
-    ``MatchConfig.guess_pairs``); the rest keep empty matching products, so that the work
-    directory is complete (the reference toolbox's ``initial_guess_auto`` reads a matches
-    file per pair) and says why they are empty.
+    The frames of a recording are matched until a few agree (:mod:`nbcalib.matching.
+    recording`, ``MatchConfig.guess_pairs``); the rest keep empty matching products, so that
+    the work directory is complete (the reference toolbox's ``initial_guess_auto`` reads a
+    matches file per pair) and says why they are empty.
     """
     corr = Correspondences.empty([pair.name])
     info = {"mode": "skipped", "reason": reason, "seconds": 0.0}
@@ -346,33 +338,14 @@ def unmatched_pair(pair, matcher: str, reason: str) -> PairMatches:
     return PairMatches(pair.name, corr, matches, matcher)
 
 
-def agreeing_pairs(found, count: int, angle_deg: float) -> list[int] | None:
-    """``count`` or more matched pairs whose own guesses agree on the rotation, or None.
-
-    ``found``: the pairs matched so far (:class:`PairMatches`). A pair counts when its own
-    matches found a pose (:attr:`PairMatches.guess_rotation`); pairs agree when their rotations
-    are within ``angle_deg`` of one pair's (the pool's rule for views). Returns the indices of
-    the largest such group (the first pair's group on a tie) when it holds at least ``count``.
-    """
-    from nbcalib.transforms import rotation_angle_deg
-
-    rotations = [(k, f.guess_rotation) for k, f in enumerate(found) if f.guess_rotation is not None]
-    best: list[int] = []
-    for _, R0 in rotations:
-        group = [k for k, R in rotations if rotation_angle_deg(R0.T @ R) < angle_deg]
-        if len(group) > len(best):
-            best = group
-    return best if count > 0 and len(best) >= count else None
-
-
 def _guess_passes(camera, corr: Correspondences, guess_config, seed: int, origin=None):
-    """(found the pose, support, R_camera_lidar) of the initial guess from one pair's matches."""
+    """(found the pose, support) of the initial guess from one pair's matches."""
     from nbcalib.initial_guess.config import InitialGuessConfig
     from nbcalib.initial_guess.estimate import MIN_CORRESPONDENCES, estimate_initial_guess
 
     cfg = guess_config or InitialGuessConfig()
     if len(corr) < MIN_CORRESPONDENCES:
-        return False, 0, None
+        return False, 0
     guess = estimate_initial_guess(
         camera,
         corr.uv_camera,
@@ -383,4 +356,4 @@ def _guess_passes(camera, corr: Correspondences, guess_config, seed: int, origin
         origin=origin,
     )
     # did this attempt find the pose? (precision is the initial-guess stage's test)
-    return bool(guess.found), int(guess.support), guess.T_camera_lidar[:3, :3].copy()
+    return bool(guess.found), int(guess.support)

@@ -337,7 +337,7 @@ def match_views(
     # the coverage gaps to inpaint, in view pixels (odd); the views have min(ppd, camera's)
     view_ppd = pixels_per_radian(camera) * scale * math.pi / 180.0
     inpaint = 2 * round(cfg.inpaint_deg * view_ppd / 2) + 1 if cfg.inpaint_deg > 0 else 0
-    if inpaint:
+    if inpaint and cfg.lift_inpainted:
         search_radius = max(search_radius, inpaint / 2)
     o = None if origin is None else np.asarray(origin, dtype=np.float64)
     o = o if o is not None and o.any() else None  # the cloud's own origin: as without one

@@ -66,6 +66,7 @@ class Calibrator(GuessSteps, JobRecords):
         self._made: dict[str, dict] = {}
         self._inputs_record = None
         self._origin = None  # LidarOrigin of preprocessing
+        self._recording = None  # RecordingMatches of a many-frame job's matching
         self._inputs = self._manual = self._prior = self._given = self._fallback = None
         self._guess_failed = False
         self._stage_t0 = time.perf_counter()

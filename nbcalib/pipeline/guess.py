@@ -46,58 +46,83 @@ class GuessSteps:
         self._remember("initial-guess", calib)
 
     def _match(self) -> None:
-        from nbcalib.matching.find import agreeing_pairs, find_correspondences, unmatched_pair
+        from nbcalib.matching.find import find_correspondences
 
         camera, cfg = self._camera(), self.config
         prior = self._prior.T_camera_lidar if self._prior is not None else None
         self.matches = {}
         pairs = self._pairs()
-        # many pairs: match them in turn until a few agree on the pose (matching.guess_pairs)
-        subset = cfg.matching.guess_pairs if 0 < cfg.matching.guess_pairs < len(pairs) else 0
-        agreed = skipped = None
-        for k, pair in enumerate(pairs):
-            if agreed is not None:
-                if skipped is None:  # the matched pairs' matcher and why the rest are not
-                    skipped = (
-                        self._matcher_name(),
-                        f"{len(agreed)} matched pairs already agree on the pose "
-                        f"(matching.guess_pairs {subset}; --guess-pairs 0 matches every pair)",
-                    )
-                found = unmatched_pair(pair, *skipped)
+        if len(pairs) > 1 and cfg.matching.views > 0:
+            # the frames of a recording share one extrinsic: they vote, then a few are matched
+            self._match_recording(pairs, prior)
+        else:  # one pair, or the stored LiDAR images as the reference toolbox matches them
+            for k, pair in enumerate(pairs):
+                if len(pairs) > 1:
+                    log.info("    [%d/%d] %s", k + 1, len(pairs), pair.name)
+                found = find_correspondences(
+                    camera,
+                    pair,
+                    cfg.matching,
+                    guess_config=cfg.initial_guess,
+                    virtual_camera=self._virtual(),
+                    T_camera_lidar_prior=prior,
+                    seed=cfg.seed,
+                    model_dir=self.model_dir,
+                    progress=True,
+                )
+                _detail(found.summary())
                 self.matches[pair.name] = found
                 if self.work is not None:
-                    self.work.write_matches(found, pair, draw=False)
-                continue
-            log.info("    [%d/%d] %s", k + 1, len(pairs), pair.name)
-            found = find_correspondences(
-                camera,
-                pair,
-                cfg.matching,
-                guess_config=cfg.initial_guess,
-                virtual_camera=self._virtual(),
+                    self.work.write_matches(found, pair, draw=cfg.matching.draw)
+        self._forget_after("find-matches")
+        self._remember("find-matches", self._calib())
+
+    def _match_recording(self, pairs, prior) -> None:
+        """Match the frames of a recording together (:mod:`nbcalib.matching.recording`)."""
+        from dataclasses import replace
+
+        from nbcalib.matching.find import unmatched_pair
+        from nbcalib.matching.match import resolve_matcher
+        from nbcalib.matching.recording import match_recording
+        from nbcalib.progress import Progress
+
+        cfg = self.config
+        matching = replace(
+            cfg.matching, matcher=resolve_matcher(cfg.matching.matcher, self.model_dir)
+        )
+        with Progress(label="find-matches") as display:
+
+            def progress(what, done, total):
+                display.total = total
+                display.done = done - 1
+                display.update(what=what)
+
+            found = match_recording(
+                self._camera(),
+                pairs,
+                matching,
+                cfg.initial_guess,
+                origin=self._lidar_origin(),
                 T_camera_lidar_prior=prior,
                 seed=cfg.seed,
                 model_dir=self.model_dir,
-                progress=True,
+                log_line=_detail,
+                progress=progress,
             )
-            _detail(found.summary())
-            self.matches[pair.name] = found
-            if self.work is not None:
-                self.work.write_matches(found, pair, draw=cfg.matching.draw)
-            if subset:
-                agreed = agreeing_pairs(
-                    list(self.matches.values()), subset, cfg.matching.pool_angle_deg
+        for pair in pairs:
+            if pair.name in found.found:
+                matched = found.found[pair.name]
+                draw = cfg.matching.draw
+            else:
+                reason = (
+                    f"{len(found.agreeing)} matched frames already agree on the pose "
+                    f"(matching.guess_pairs {cfg.matching.guess_pairs}: 0 matches every frame)"
                 )
-                if agreed is not None and k + 1 < len(pairs):
-                    log.info(
-                        "    %d pairs agree on the pose (%s): the other %d are not matched "
-                        "(--guess-pairs 0 matches every pair)",
-                        len(agreed),
-                        ", ".join(pairs[i].name for i in agreed),
-                        len(pairs) - k - 1,
-                    )
-        self._forget_after("find-matches")
-        self._remember("find-matches", self._calib())
+                matched, draw = unmatched_pair(pair, matching.matcher, reason), False
+            self.matches[pair.name] = matched
+            if self.work is not None:
+                self.work.write_matches(matched, pair, draw=draw)
+        self._recording = found
 
     def _initial_guess(self) -> None:
         from nbcalib.initial_guess.estimate import MIN_CORRESPONDENCES, estimate_initial_guess
@@ -133,7 +158,9 @@ class GuessSteps:
         _detail(guess.summary())
         matcher = None if manual else self._matcher_name()
         source = f"hand-picked correspondences ({self._manual})" if manual else f"{matcher} matches"
-        if not guess.success and not self._accept_failed_guess:
+        # a guess whose matches found the pose is refined even when its precision is in doubt:
+        # fine registration's basin is wider than the test's bound, and the report judges the end
+        if not guess.found and not self._accept_failed_guess:
             if manual:
                 raise InputError(
                     f"initial guess not written: {guess.failure} (--force writes it anyway)", where
@@ -154,7 +181,11 @@ class GuessSteps:
             guess.n_correspondences,
             guess.rms_px,
             guess.distinctiveness,
-            "looks right" if guess.success else "FAILED its test, kept as asked",
+            "looks right"
+            if guess.success
+            else "imprecise: fine registration refines it and the report judges the result"
+            if guess.found
+            else "FAILED its test, kept as asked",
         )
         self.start = Start.from_matrix(guess.T_camera_lidar, stage)
         self._forget_after("initial-guess")
@@ -176,6 +207,7 @@ class GuessSteps:
                 confidence_weights=bool(cfg.confidence_weights and corr.confidence is not None),
                 source=str(self._manual) if manual else "matches",
                 matcher=matcher,
+                precise=bool(guess.precise),
             )
         self._remember("initial-guess", calib)
 
