@@ -63,9 +63,11 @@ class RefineConfig:
     max_inner : int
         Iterations (L-BFGS) or, times 40, evaluations (Nelder-Mead) per outer iteration.
     lbfgs_ftol : float
-        L-BFGS-B's stop on the relative reduction of the cost between iterations (1e-7). 1e-9
-        took twice the evaluations on synthetic pairs for the same result, but let the flat
-        costs of real frames go on improving (docs/BENCHMARKS.md, real data).
+        L-BFGS-B's stop on the relative reduction of the cost between iterations (1e-9). Its
+        chart is scaled to 1 cm / 0.05 deg (:data:`~nbcalib.registration.optimize.
+        LBFGS_SCALE`), so its first steps are that small: at 1e-7 the reduction of a first step
+        on a cost far from its minimum stopped the search at once (3 deg / 10 cm off a textured
+        synthetic pair, tests/test_calibrate.py).
     nelder_mead_init_step : float
         Initial simplex size in the tangent space, metres and radians, doubled per pyramid level
         (1e-2; reference: 1e-3, whose simplex converged in 3 / 2 / 0 / 0 of 5 starts 1 / 2 / 3 /
@@ -129,6 +131,10 @@ class RefineConfig:
         Fewer LiDAR points than this in the images at a pose being refined is refused (a user
         error: the start looks away from the cloud, or the camera does not fit the images):
         a joint histogram of 16 x 16 bins needs a few points per cell.
+    basin_translation : float
+        With two or more pairs, the first stage is run again from the result's camera moved
+        this far along each camera axis, both ways, and the lowest end is kept
+        (:mod:`nbcalib.registration.basin`; metres, 0.15; 0: no such search).
     """
 
     optimizer: str = "hybrid"
@@ -144,7 +150,7 @@ class RefineConfig:
     converge_translation: float = 1e-3
     converge_rotation_deg: float = 0.01
     max_inner: int = 50
-    lbfgs_ftol: float = 1e-7
+    lbfgs_ftol: float = 1e-9
     nelder_mead_init_step: float = 1e-2
     nelder_mead_xatol: float = 1e-4
     nelder_mead_fatol: float = 1e-5
@@ -161,6 +167,7 @@ class RefineConfig:
     min_sampled_points: int = 50_000
     job_points: int | None = 1_000_000
     min_visible_points: int = 100
+    basin_translation: float = 0.15
 
     def __post_init__(self):
         if self.optimizer not in OPTIMIZERS:
@@ -174,6 +181,7 @@ class RefineConfig:
             "trust_translation",
             "trust_rotation_deg",
             "structure_weight",
+            "basin_translation",
         ):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} must be >= 0")

@@ -12,7 +12,12 @@ same thing without making the line search fail).
   ``init_step`` along each axis.
 - :func:`minimize_lbfgs`: quasi-Newton with the exact gradient of the smooth NID. The cost's
   gradient is with respect to a left perturbation at ``T(delta)``; the chain rule through the
-  SE(3) exponential (``d/d delta = J_l(delta)^T g``) makes it the gradient in the chart.
+  SE(3) exponential (``d/d delta = J_l(delta)^T g``) makes it the gradient in the chart. The
+  chart is scaled to :data:`LBFGS_SCALE` (1 cm, 0.05 degrees: an equal move of points about
+  11 m away): unscaled, a rotation's gradient is ~50 times a translation's, the first quasi-
+  Newton steps were nearly pure rotations and the search stopped on its relative-reduction
+  test with the translation short of the minimum (10 synthetic frames from 1 deg / 5 cm: 2.0 cm
+  from the truth instead of 0.9; docs/BENCHMARKS.md 5.4).
 
 Given a ``trust_region`` (:class:`nbcalib.registration.trust.TrustRegion`, the bound of the whole
 run around its start), both return only poses inside it: the box is shrunk to what can reach the
@@ -35,7 +40,16 @@ from nbcalib.transforms import hat, se3_exp, so3_left_jacobian
 if TYPE_CHECKING:
     from nbcalib.registration.trust import TrustRegion
 
-__all__ = ["InnerResult", "minimize_lbfgs", "minimize_nelder_mead", "se3_left_jacobian"]
+__all__ = [
+    "LBFGS_SCALE",
+    "InnerResult",
+    "minimize_lbfgs",
+    "minimize_nelder_mead",
+    "se3_left_jacobian",
+]
+
+#: Units of L-BFGS's chart variables: metres for ``v``, radians for ``omega`` (1 cm, 0.05 deg).
+LBFGS_SCALE = np.array([0.01] * 3 + [math.radians(0.05)] * 3)
 
 
 @dataclass
@@ -189,21 +203,27 @@ def minimize_lbfgs(
         objective = trust_region.penalised_value_and_grad(cost_and_grad)
         max_translation, max_rotation = trust_region.chart_bounds(T0, max_translation, max_rotation)
 
-    def f(delta):
+    scale = LBFGS_SCALE
+
+    def f(x):
+        delta = x * scale
         value, g = objective(se3_exp(delta) @ T0)
         history.append(value)
-        return value, se3_left_jacobian(delta).T @ g
+        return value, (se3_left_jacobian(delta).T @ g) * scale
 
+    bounds = [
+        (lo / k, hi / k) for (lo, hi), k in zip(_bounds(max_translation, max_rotation), scale)
+    ]
     res = minimize(
         f,
         np.zeros(6),
         jac=True,
         method="L-BFGS-B",
-        bounds=_bounds(max_translation, max_rotation),
+        bounds=bounds,
         options={"maxiter": max_iterations, "gtol": gtol, "ftol": ftol},
     )
     result = InnerResult(
-        se3_exp(res.x) @ T0,
+        se3_exp(res.x * scale) @ T0,
         float(res.fun),
         int(res.nit),
         int(res.nfev),
