@@ -131,10 +131,6 @@ class RefineConfig:
         Fewer LiDAR points than this in the images at a pose being refined is refused (a user
         error: the start looks away from the cloud, or the camera does not fit the images):
         a joint histogram of 16 x 16 bins needs a few points per cell.
-    basin_translation : float
-        With two or more pairs, the first stage is run again from the result's camera moved
-        this far along each camera axis, both ways, and the lowest end is kept
-        (:mod:`nbcalib.registration.basin`; metres, 0.15; 0: no such search).
     """
 
     optimizer: str = "hybrid"
@@ -167,7 +163,6 @@ class RefineConfig:
     min_sampled_points: int = 50_000
     job_points: int | None = 1_000_000
     min_visible_points: int = 100
-    basin_translation: float = 0.15
 
     def __post_init__(self):
         if self.optimizer not in OPTIMIZERS:
@@ -181,7 +176,6 @@ class RefineConfig:
             "trust_translation",
             "trust_rotation_deg",
             "structure_weight",
-            "basin_translation",
         ):
             if not getattr(self, name) >= 0:
                 raise ValueError(f"{name} must be >= 0")

@@ -222,9 +222,7 @@ class RefineResult:
     ``stopped`` says why a run was cut short (empty when it converged or used its iterations;
     no setting cuts a run short now: the trust region bounds it instead). ``T_init`` is the
     initial guess and ``trust_translation`` / ``trust_rotation_deg`` the trust region around it
-    that the run stayed in (:mod:`nbcalib.registration.trust`). ``basin_candidates``: the ends
-    of the basin search's starts and their NID under one cost (:mod:`nbcalib.registration.
-    basin`; empty for one pair).
+    that the run stayed in (:mod:`nbcalib.registration.trust`).
     """
 
     T_camera_lidar: np.ndarray
@@ -234,7 +232,6 @@ class RefineResult:
     T_init: np.ndarray | None = None
     trust_translation: float | None = None
     trust_rotation_deg: float | None = None
-    basin_candidates: list = field(default_factory=list)
 
     @property
     def moved(self) -> tuple[float, float]:
@@ -403,16 +400,8 @@ def refine(
                 progress(outer, step)
             display.update(what=f"outer iterations (level {step.level}, NID {step.nid:.5f})")
 
-        for k, stage in enumerate(stages):
+        for stage in stages:
             _run_levels(pairs, region, stage, result, report)
-            if k == 0 and len(pairs) >= 2 and config.basin_translation > 0:
-                # several pairs: leave a wrong basin (nbcalib.registration.basin)
-                from nbcalib.registration.basin import basin_search
-
-                def run_stage(cfg, trial, progress, pairs=pairs, region=region):
-                    _run_levels(pairs, region, cfg, trial, progress)
-
-                basin_search(pairs, region, stage, result, run_stage, report)
     return result
 
 
