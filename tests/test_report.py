@@ -187,7 +187,7 @@ def test_rejudge_scales_the_intervals(quality_at_truth):
 def test_jackknife_of_blocks_is_the_spread_of_their_optima():
     # blocks with the same curvature and their own optima c_b: the summed cost's minimum is their
     # mean, and the delete-a-block jackknife gives the variance of a mean, s^2 / B (Efron-Stein)
-    from nbcalib.report.quality import _jackknife
+    from nbcalib.report.uncertainty import _jackknife
 
     rng = np.random.default_rng(3)
     B, H0 = 12, np.diag([4e4, 5e4, 3e4, 9e5, 8e5, 7e5])
@@ -206,7 +206,7 @@ def test_the_pair_test_keeps_its_false_alarm_rate_for_many_pairs(spread):
     # unequally over the axes: the chance that any of K pairs is called elsewhere stays below
     # 1 - q and does not grow with K (two pairs cannot know a spread above the floor; from five
     # on the other pairs' spread stands in)
-    from nbcalib.report.quality import pairs_elsewhere
+    from nbcalib.report.verdict import pairs_elsewhere
 
     rng = np.random.default_rng(4)
     q, floor = 0.99, np.array([0.003] * 3 + [1e-3] * 3)
@@ -229,7 +229,7 @@ def test_the_pair_test_keeps_its_false_alarm_rate_for_many_pairs(spread):
 
 @pytest.mark.parametrize("n_pairs", [2, 5, 15])
 def test_the_pair_test_names_a_pair_far_off(n_pairs):
-    from nbcalib.report.quality import pairs_elsewhere
+    from nbcalib.report.verdict import pairs_elsewhere
 
     rng = np.random.default_rng(n_pairs)
     floor = np.array([0.003] * 3 + [1e-3] * 3)
@@ -248,7 +248,7 @@ def test_the_pair_test_names_a_pair_far_off(n_pairs):
 
 def test_the_pair_test_with_no_uncertainty_at_all_flags_any_difference():
     """Both floors set to 0 and no curvature: identical pairs agree, a different one does not."""
-    from nbcalib.report.quality import pairs_elsewhere
+    from nbcalib.report.verdict import pairs_elsewhere
 
     own = np.zeros((3, 6, 6))
     same = np.zeros((3, 6))
@@ -331,7 +331,7 @@ def _with_eigenvalue(H, direction, value):
 
 
 def test_a_direction_without_curvature_is_measured_again_from_the_values():
-    from nbcalib.report.quality import _remeasure_flat_directions
+    from nbcalib.report.uncertainty import _remeasure_flat_directions
 
     B = np.diag([40.0, 60.0, 20.0, 9e4, 8e4, 7e4])
     d = np.zeros(6)
@@ -344,7 +344,7 @@ def test_a_direction_without_curvature_is_measured_again_from_the_values():
 
 
 def test_a_direction_the_values_do_not_rise_along_stays_flat():
-    from nbcalib.report.quality import _remeasure_flat_directions
+    from nbcalib.report.uncertainty import _remeasure_flat_directions
 
     B = np.diag([40.0, 60.0, 0.0, 9e4, 8e4, 7e4])  # no rise along tz at any scale
     d = np.zeros(6)
@@ -390,7 +390,7 @@ def test_per_pair_optima_take_no_step_along_re_measured_directions(pair, monkeyp
     # whose gradient differences showed no positive curvature that model has none, even when the
     # values (and so the uncertainty) give the direction a curvature
     from nbcalib.report import quality as quality_module
-    from nbcalib.report.quality import _newton_inverse
+    from nbcalib.report.uncertainty import _newton_inverse
 
     true_hessian = quality_module._hessian
     flipped = []
@@ -431,7 +431,7 @@ def test_pixels_covered_from_the_z_buffer_equal_projecting_the_visible_points(pa
     """The report counts a pair's pixels from the z-buffer's own pixels: the same count as
     projecting the visible points again and rounding them to pixels."""
     from nbcalib.registration.refine import visible_subset
-    from nbcalib.report.quality import _pixels_covered
+    from nbcalib.report.uncertainty import _pixels_covered
 
     config = RefineConfig()
     for T in (np.eye(4), se3_exp(np.array([0.03, -0.02, 0.01, 0.004, -0.003, 0.002]))):
@@ -758,7 +758,7 @@ def test_the_parallel_kernels_give_the_report_of_the_serial_ones(
 
 
 def test_restart_starts_are_exactly_the_stated_distance_away():
-    from nbcalib.report.quality import restart_starts
+    from nbcalib.report.uncertainty import restart_starts
     from nbcalib.transforms import invert_T, pose_error
 
     T = se3_exp([0.1, -0.2, 0.3, 0.2, -0.1, 0.05])
@@ -811,7 +811,7 @@ def test_restarts_that_end_elsewhere_widen_the_interval_and_make_it_suspect(qual
 def test_restarts_score_restart_points_of_the_pair(pair, monkeypatch):
     """Each restart scores AssessConfig.restart_points points (never more than fine
     registration's own budget); None: fine registration's budget as it is."""
-    import nbcalib.report.quality as quality_module
+    import nbcalib.report.uncertainty as quality_module
 
     budgets = []
     real = quality_module.refine

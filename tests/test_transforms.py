@@ -533,7 +533,7 @@ def test_offset_pose_is_exactly_the_asked_distance_and_angle_away():
     """offset_pose: exactly angle_deg and distance from the pose (pose_error of the camera
     poses), seeded by its generator (a generator continues its sequence, as several starts
     drawn from one generator need), and the report's restarts are made by it."""
-    from nbcalib.report.quality import RESTART_SEED, restart_starts
+    from nbcalib.report.uncertainty import RESTART_SEED, restart_starts
     from nbcalib.transforms import invert_T, offset_pose, pose_error, se3_exp
 
     T = se3_exp(np.array([0.1, -0.2, 0.3, 0.2, -0.1, 0.05]))

@@ -52,7 +52,7 @@ class AssessConfig:
     pair_disagreement_quantile : float
         Pairs disagree when a pair's own optimum lies farther from the other pairs' mean than
         their uncertainties and a single shot's bias allow, each axis of each of ``K`` pairs
-        tested at ``(1 - q) / (6 K)`` (:func:`~nbcalib.report.quality.pairs_elsewhere`): with
+        tested at ``(1 - q) / (6 K)`` (:func:`~nbcalib.report.verdict.pairs_elsewhere`): with
         agreeing pairs, the chance that any of them is called elsewhere is below ``1 - q``
         whatever ``K``.
     pair_bias_translation, pair_bias_rotation_deg : float
