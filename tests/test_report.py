@@ -521,7 +521,9 @@ def test_report_without_matplotlib_has_numbers_only(workdir, monkeypatch):
         raise MissingExtraError(module, extra)
 
     monkeypatch.setattr(report_html, "require", missing)
-    report = report_html.make_report(workdir.path)
+    from nbcalib.pipeline import make_report
+
+    report = make_report(workdir.path)
     page = report.html_path.read_text()
     assert "numbers only" in page and "nbcalib[viz]" in page
     assert report.figures == [] and not list(report.html_path.parent.glob("*.png"))
@@ -529,7 +531,7 @@ def test_report_without_matplotlib_has_numbers_only(workdir, monkeypatch):
 
 def test_a_failed_report_leaves_the_previous_one_whole(workdir, monkeypatch):
     import nbcalib.report.figures as figures
-    from nbcalib.report.html import make_report
+    from nbcalib.pipeline import make_report
 
     first = make_report(workdir.path)
     page = first.html_path.read_text()
@@ -545,7 +547,7 @@ def test_a_failed_report_leaves_the_previous_one_whole(workdir, monkeypatch):
 
 
 def test_report_flags_a_garbage_result(workdir):
-    from nbcalib.report.html import make_report
+    from nbcalib.pipeline import make_report
 
     calib = read_calib_json(workdir.calib_path)
     calib.set_T_camera_lidar("T_lidar_camera", se3_exp(np.array([0.07, 0, 0.03, 0, 0.02, 0])))

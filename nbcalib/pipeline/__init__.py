@@ -31,7 +31,7 @@ Example
 >>> result.T_lidar_camera, result.quality.verdict                             # doctest: +SKIP
 """
 
-from nbcalib.pipeline.calibrator import Calibrator
+from nbcalib.pipeline.calibrator import Calibrator, make_report
 from nbcalib.resume import STAGES
 
-__all__ = ["STAGES", "Calibrator"]
+__all__ = ["STAGES", "Calibrator", "make_report"]

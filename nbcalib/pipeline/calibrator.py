@@ -24,7 +24,7 @@ from nbcalib.products import CalibrationResult, Start, as_stored_values
 from nbcalib.resume import plan_stages
 from nbcalib.workdir import WorkDir
 
-__all__ = ["Calibrator"]
+__all__ = ["Calibrator", "make_report"]
 
 log = logging.getLogger("nbcalib.pipeline")
 
@@ -531,3 +531,43 @@ class Calibrator(GuessSteps, JobRecords):
                 self.work.calib_path,
             )
         return calib.get_T_camera_lidar(FINAL_STAGE)
+
+
+def make_report(workdir, *, assess_config=None):
+    """Judge the calibration of a work directory and write its HTML report (``nbcalib report``).
+
+    The assessment stage of :class:`nbcalib.pipeline.Calibrator`, as ``nbcalib report`` runs
+    it: the settings the work directory recorded, with ``assess_config`` (default:
+    ``AssessConfig()``) as the assessment's own.
+
+    Parameters
+    ----------
+    workdir : str or PathLike
+        A work directory with ``calib.json`` holding ``results.T_lidar_camera`` (written by
+        ``nbcalib calibrate``).
+    assess_config : AssessConfig, optional
+        Scale and verdict limits of :func:`~nbcalib.report.quality.assess`.
+
+    Returns
+    -------
+    Report
+
+    Raises
+    ------
+    InputError
+        No work directory, no ``calib.json``, no calibration result, or a missing or corrupt
+        pair file; the message names the file and the command to run first.
+    """
+    from dataclasses import replace
+
+    from nbcalib.config import config_from_record
+    from nbcalib.report.config import AssessConfig
+
+    work = WorkDir(workdir)
+    if work.path.is_dir() and not work.calib_path.is_file():
+        raise InputError("no calib.json here: run nbcalib preprocess first", work.path)
+    config = config_from_record(work.require_preprocessed().record.config)
+    config = replace(config, assess=assess_config or AssessConfig())
+    calibrator = Calibrator(config, workdir=work)
+    calibrator.run(only="report")
+    return calibrator.report

@@ -24,6 +24,6 @@ __getattr__, __dir__, __all__ = lazy_exports(
             "rejudge",
         ),
         "config": ("AssessConfig",),
-        "html": ("Report", "make_report", "write_report"),
+        "html": ("Report", "write_report"),
     },
 )

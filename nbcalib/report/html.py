@@ -1,9 +1,10 @@
 """``WORKDIR/report/index.html``: the quality report of a calibrated work directory.
 
-:func:`make_report` loads the pairs and the result of a work directory, judges the result with
-:func:`nbcalib.report.quality.assess`, writes the HTML page with its PNG figures, and stores the
-quality figures in ``calib.json`` under ``nbcalib.quality`` (the reference's keys are not
-touched).
+:func:`write_report` writes the HTML page of an assessed result (:func:`nbcalib.report.
+quality.assess`) with its PNG figures, and stores the quality figures in ``calib.json`` under
+``nbcalib.quality`` (the reference's keys are not touched). It renders from the products and
+records it is given: the report stage of :class:`nbcalib.pipeline.Calibrator` calls it
+(:func:`nbcalib.pipeline.make_report` for a work directory as ``nbcalib report`` does).
 
 **Crash safety.** The report is written into a hidden temporary folder next to ``report/``
 (figures first, ``index.html`` last) that replaces ``report/`` by renames only when it is
@@ -28,15 +29,14 @@ from pathlib import Path
 
 import numpy as np
 
-from nbcalib.errors import InputError, MissingExtraError, require
+from nbcalib.errors import MissingExtraError, require
 from nbcalib.io._files import write_bytes_atomic, write_text_atomic
 from nbcalib.io.calib_json import FINAL_STAGE
 from nbcalib.io.job_record import QualityRecord
 from nbcalib.progress import Progress
-from nbcalib.report.config import AssessConfig
 from nbcalib.report.quality import AXIS_NAMES, Quality, format_bound
 
-__all__ = ["REPORT_DIR", "Report", "make_report", "move_summary", "write_report"]
+__all__ = ["REPORT_DIR", "Report", "move_summary", "write_report"]
 
 #: Folder of the report inside the work directory.
 REPORT_DIR = "report"
@@ -77,47 +77,6 @@ class Report:
             if p.is_file()
         )
         return _summary_html(self.quality) + images
-
-
-def make_report(workdir: str | os.PathLike, *, assess_config: AssessConfig | None = None) -> Report:
-    """Judge the calibration of a work directory and write its HTML report (``nbcalib report``).
-
-    The assessment stage of :class:`nbcalib.pipeline.Calibrator`, as ``nbcalib report`` runs
-    it: the settings the work directory recorded, with ``assess_config`` (default:
-    ``AssessConfig()``) as the assessment's own.
-
-    Parameters
-    ----------
-    workdir : str or PathLike
-        A work directory with ``calib.json`` holding ``results.T_lidar_camera`` (written by
-        ``nbcalib calibrate``).
-    assess_config : AssessConfig, optional
-        Scale and verdict limits of :func:`~nbcalib.report.quality.assess`.
-
-    Returns
-    -------
-    Report
-
-    Raises
-    ------
-    InputError
-        No work directory, no ``calib.json``, no calibration result, or a missing or corrupt
-        pair file; the message names the file and the command to run first.
-    """
-    from dataclasses import replace
-
-    from nbcalib.config import config_from_record
-    from nbcalib.pipeline import Calibrator
-    from nbcalib.workdir import WorkDir
-
-    work = WorkDir(workdir)
-    if work.path.is_dir() and not work.calib_path.is_file():
-        raise InputError("no calib.json here: run nbcalib preprocess first", work.path)
-    config = config_from_record(work.require_preprocessed().record.config)
-    config = replace(config, assess=assess_config or AssessConfig())
-    calibrator = Calibrator(config, workdir=work)
-    calibrator.run(only="report")
-    return calibrator.report
 
 
 def write_report(
