@@ -115,11 +115,13 @@ from nbcalib.report.uncertainty import (
     _remeasure_flat_directions,
     _restart_offsets,
     _uncertainty,
+    leave_one_out,
+    views,
 )
 from nbcalib.report.verdict import (
-    ADVICE,
     _finite,
     _move_allowed,
+    advice,
     format_bound,
     pairs_elsewhere,
     reasons,
@@ -204,6 +206,13 @@ class Quality:
         Where fine registration ends when started again around the result
         (:attr:`AssessConfig.restarts` starts), ``delta`` with ``exp(delta) @ T_camera_lidar``
         the end; empty when there were no restarts.
+    views : ndarray of shape (K,), int64
+        A label per pair: pairs whose camera images show one view share it
+        (:func:`~nbcalib.report.uncertainty.views`; a camera that did not move between them).
+        Empty when not known: each pair its own view.
+    leave_one_out : ndarray of shape (K, 6) or None
+        Where the result moves with each pair left out (one Newton step), when K >= 3
+        (:func:`~nbcalib.report.uncertainty.leave_one_out`).
     trust_region : tuple of 2 floats or None
         Fine registration's trust region around the start: metres and degrees.
     start_uncertainty : tuple of 2 floats or None
@@ -239,6 +248,8 @@ class Quality:
     block_gradients: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)), repr=False)
     block_hessians: np.ndarray = field(default_factory=lambda: np.zeros((0, 6, 6)), repr=False)
     restart_offsets: np.ndarray = field(default_factory=lambda: np.zeros((0, 6)), repr=False)
+    views: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64), repr=False)
+    leave_one_out: np.ndarray | None = field(default=None, repr=False)
     trust_region: tuple[float, float] | None = None
     start_uncertainty: tuple[float, float] | None = None
     move_allowed: tuple[float, float] | None = None
@@ -266,6 +277,11 @@ class Quality:
         if self.trust_region is not None:
             return tuple(self.trust_region), "trust region"
         return None
+
+    @property
+    def n_views(self) -> int:
+        """Distinct views among the pairs (each pair its own when not known)."""
+        return len(np.unique(self.views)) if len(self.views) == len(self.names) else len(self.names)
 
     @property
     def sigma(self) -> np.ndarray:
@@ -426,10 +442,12 @@ def assess(
     T = validate_T(np.asarray(T_camera_lidar, dtype=np.float64), "T_camera_lidar")
     steps = np.array([acfg.hessian_translation] * 3 + [math.radians(acfg.hessian_rotation_deg)] * 3)
 
-    # a single shot only: with two or more pairs their own spread (the jackknife over their
+    # a single shot only: with two or more views their own spread (the jackknife over their
     # regions, the pair test) measures the shot-to-shot bias that restarts find, and restarting
-    # a many-pair job costs minutes (a 2-pair Livox report 15 -> 117 s)
-    n_restarts = acfg.restarts if len(pairs) == 1 else 0
+    # a many-pair job costs minutes (a 2-pair Livox report 15 -> 117 s). Pairs that all show
+    # one view (a camera that did not move) are one shot however many there are
+    labels = views([p.image for p in pairs])
+    n_restarts = acfg.restarts if len(np.unique(labels)) == 1 else 0
     with Progress(len(pairs) + 6 + n_restarts, "quality", enabled=progress is True) as display:
 
         def step(what: str) -> None:
@@ -519,6 +537,7 @@ def assess(
         block_gradients=np.concatenate(block_grads) if block_grads else np.zeros((0, 6)),
         block_hessians=np.concatenate(block_hessians) if block_hessians else np.zeros((0, 6, 6)),
         restart_offsets=restart_offsets,
+        views=labels,
         trust_region=(rcfg.trust_translation, rcfg.trust_rotation_deg),
         start_uncertainty=start_uncertainty,
     )
@@ -580,6 +599,8 @@ def rejudge(quality: Quality, assess_config: AssessConfig) -> Quality:
         )
         pair_ratios = pairs_elsewhere(offsets, owns, floor, acfg.pair_disagreement_quantile)
         q.pair_offsets = offsets
+        if n_pairs >= 3:
+            q.leave_one_out = leave_one_out(q.pair_gradients, raw, spans)
         if jackknife is None:  # the blocks' spread holds the pairs' when there are blocks
             covariance = covariance + np.cov(offsets.T, ddof=1) / n_pairs
     # judged as if there had been fewer: restart_starts are seeded, so the first k of the stored
@@ -609,6 +630,6 @@ def rejudge(quality: Quality, assess_config: AssessConfig) -> Quality:
     q.move_allowed = _move_allowed(q)
     found = reasons(q, n_negative, pair_ratios)
     q.reasons = [line for _, line in found]
-    q.next_steps = list(dict.fromkeys(ADVICE[kind] for kind, _ in found))
+    q.next_steps = list(dict.fromkeys(advice(kind, q) for kind, _ in found))
     q.verdict = "suspect" if q.reasons else "ok"
     return q

@@ -18,7 +18,11 @@ from nbcalib.report.uncertainty import AXIS_NAMES
 if TYPE_CHECKING:
     from nbcalib.report.quality import Quality
 
-__all__ = ["ADVICE", "format_bound", "pairs_elsewhere", "reasons"]
+__all__ = ["ADVICE", "MANY_VIEWS", "advice", "format_bound", "pairs_elsewhere", "reasons"]
+
+#: Pairs of at least this many distinct views are independent evidence: their agreement, not
+#: each one's sharpness, the NID level or the start, says whether the result holds.
+MANY_VIEWS = 3
 
 #: An uncertainty beyond these says only that the cost does not pin the pose down: no rig's
 #: extrinsic is unknown by more than 10 metres, and no rotation error exceeds 180 degrees.
@@ -142,6 +146,29 @@ ADVICE["unstable"] = (
     "(nbcalib calibrate WORKDIR --force --init X,Y,Z,QX,QY,QZ,QW)."
 )
 ADVICE["trust_edge"] = ADVICE["moved_far"] = ADVICE["far_from_guess"]
+ADVICE["rests_on"] = (
+    "One frame decides the result alone: look at its overlays (a wrong image, a time offset, "
+    "motion), calibrate without it, or add frames seen from other places so that no frame "
+    "decides alone."
+)
+ADVICE["flat_frames"] = (
+    "These frames do not pin the named axes down: add frames seen from other places or "
+    "headings, with structure near the camera (a few metres) as well as far (a forward "
+    "translation shows only in near structure), and calibrate them together."
+)
+#: Advice for a job of several pairs that all show one view, in place of "flat" and "unstable".
+ONE_VIEW = (
+    "The pairs all show one view (the camera did not move between them), so they add up to one "
+    "shot: record frames from other places or headings (drive or carry the rig between them) "
+    "and calibrate them together."
+)
+
+
+def advice(kind: str, q: Quality) -> str:
+    """The line of advice for a reason of ``kind`` in this job (:data:`ADVICE`)."""
+    if kind in ("flat", "unstable") and len(q.names) >= 2 and q.n_views == 1:
+        return ONE_VIEW
+    return ADVICE[kind]
 
 
 def pairs_elsewhere(offsets, own_covariances, bias_floor, quantile: float) -> list[float]:
@@ -218,6 +245,9 @@ def reasons(q: Quality, n_negative: int, pair_ratios: list[float]) -> list[tuple
     """``(kind, line)`` per reason to distrust the result (empty: ok); kinds of :data:`ADVICE`."""
     c = q.config
     reasons = []
+    # independent views that agree judge the result; the single-shot tests below (each pair's
+    # sharpness, the NID level, the distance from the start) do not apply to them
+    independent = q.n_views >= MANY_VIEWS
     total_visible = int(q.visible_points.sum())
     if total_visible < c.min_visible_points:
         reasons.append(
@@ -227,7 +257,7 @@ def reasons(q: Quality, n_negative: int, pair_ratios: list[float]) -> list[tuple
                 f"(at least {c.min_visible_points})",
             )
         )
-    if q.nid_per_pair.size and float(np.mean(q.nid_per_pair)) > c.max_nid:
+    if not independent and q.nid_per_pair.size and float(np.mean(q.nid_per_pair)) > c.max_nid:
         reasons.append(
             (
                 "no_information",
@@ -253,10 +283,11 @@ def reasons(q: Quality, n_negative: int, pair_ratios: list[float]) -> list[tuple
     centre = q.curve_values.shape[1] // 2
     rise = 0.5 * (q.curve_values[:, 0] + q.curve_values[:, -1]) - q.curve_values[:, centre]
     flat_axes = [AXIS_NAMES[a] for a in range(6) if rise[a] / n_pairs < c.min_curve_rise]
-    if flat_axes:
+    if flat_axes and not independent:
         flat.append(f"NID hardly rises along {', '.join(flat_axes)}")
     if flat:
-        reasons.append(("flat", "flat cost: " + "; ".join(flat)))
+        kind = "flat_frames" if independent else "flat"
+        reasons.append((kind, "flat cost: " + "; ".join(flat)))
     off_axes = []
     limits = [c.max_minimum_offset_translation] * 3 + [
         math.radians(c.max_minimum_offset_rotation_deg)
@@ -271,7 +302,7 @@ def reasons(q: Quality, n_negative: int, pair_ratios: list[float]) -> list[tuple
         reasons.append(
             ("not_at_minimum", "not at a minimum: the NID is lower at " + ", ".join(off_axes))
         )
-    if q.init_change is not None:
+    if q.init_change is not None and not independent:
         dt, dr = q.init_change
         if dt > c.max_init_translation or dr > c.max_init_rotation_deg:
             reasons.append(
@@ -304,8 +335,31 @@ def reasons(q: Quality, n_negative: int, pair_ratios: list[float]) -> list[tuple
                     f"pairs disagree: the optimum of {', '.join(bad)} lies elsewhere",
                 )
             )
+    if independent and q.leave_one_out is not None:
+        reasons += _leave_one_out_reasons(q)
     if q.converged is False:
         reasons.append(
             ("not_converged", "the optimiser did not converge (stopped at its iteration limit)")
         )
     return reasons
+
+
+def _leave_one_out_reasons(q: Quality) -> list[tuple[str, str]]:
+    """A pair without which the result moves beyond its own uncertainty decides it alone."""
+    u = q.uncertainty
+    limit_m, limit_deg = u["translation_total_cm"] / 100.0, u["rotation_total_deg"]
+    moves = np.asarray(q.leave_one_out, dtype=np.float64)
+    t = np.linalg.norm(moves[:, :3], axis=1)
+    r = np.degrees(np.linalg.norm(moves[:, 3:], axis=1))
+    bad = [k for k in range(len(moves)) if t[k] > limit_m or r[k] > limit_deg]
+    if not bad:
+        return []
+    k = max(bad, key=lambda j: max(t[j] / max(limit_m, 1e-12), r[j] / max(limit_deg, 1e-12)))
+    return [
+        (
+            "rests_on",
+            f"the result rests on {', '.join(q.names[j] for j in bad)}: without {q.names[k]} it "
+            f"moves {100 * t[k]:.2f} cm / {r[k]:.3f} deg, more than its uncertainty "
+            f"({100 * limit_m:.2f} cm / {limit_deg:.3f} deg)",
+        )
+    ]
