@@ -497,6 +497,7 @@ def test_report_writes_html_figures_and_calib_json(workdir, capsys):
     assert load_quality(folder / "quality.npz").verdict == "ok"  # the material to judge again
     pngs = sorted(p.name for p in folder.glob("*.png"))
     assert pngs == [
+        "alignment_000000.png",
         "edges_000000.png",
         "nid_curves.png",
         "overlay_000000.png",

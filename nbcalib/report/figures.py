@@ -15,6 +15,8 @@ from nbcalib.camera import CameraModel
 from nbcalib.report.quality import AXIS_NAMES, Quality
 
 __all__ = [
+    "alignment",
+    "crop_windows",
     "edge_overlay",
     "lidar_edge_points",
     "nid_curves",
@@ -37,6 +39,12 @@ EDGE_PANEL_WIDTH = 540
 
 #: Grey level (0-255) of the image edges in :func:`edge_overlay`.
 EDGE_GREY = 140
+
+#: :func:`alignment`: the widest full-width panel (pixels; the camera's own width when
+#: narrower), the crops' share of the image width and their magnification.
+ALIGNMENT_WIDTH = 1600
+CROP_SHARE = 0.14
+CROP_ZOOM = 4
 
 _TITLE_PX = 26  # space above each panel for its title
 _MARGIN_PX = 10
@@ -370,6 +378,107 @@ def edge_overlay(camera: CameraModel, image, points_lidar, edge_points, poses) -
             fig_size,
             picture,
             f"{title}: image edges (grey), LiDAR edges (orange)",
+        )
+    return _png(fig, compress_level=3)
+
+
+def crop_windows(uv: np.ndarray, image: np.ndarray, size: tuple[int, int], count: int = 2):
+    """Where the structure is: windows with the most projected edge points on image edges.
+
+    Each LiDAR edge point ``uv`` (camera pixels) scores the image's gradient magnitude around
+    it; a window's score is the sum over its points (a box filter of the score map), and the
+    ``count`` best windows that do not overlap are returned, best first.
+
+    Returns
+    -------
+    list of (left, top)
+        Window corners, pixels, each window ``size`` = (width, height) inside the image.
+    """
+    import cv2
+
+    h, w = image.shape[:2]
+    cw, ch = min(size[0], w), min(size[1], h)
+    grey = cv2.GaussianBlur(np.asarray(image, dtype=np.float32), (0, 0), 1.0)
+    gradient = np.hypot(cv2.Sobel(grey, cv2.CV_32F, 1, 0), cv2.Sobel(grey, cv2.CV_32F, 0, 1))
+    col = np.clip(np.floor(uv[:, 0] + 0.5).astype(np.int64), 0, w - 1)
+    row = np.clip(np.floor(uv[:, 1] + 0.5).astype(np.int64), 0, h - 1)
+    score = np.zeros((h, w), dtype=np.float64)
+    np.add.at(score, (row, col), gradient[row, col])
+    integral = np.pad(score, ((1, 0), (1, 0))).cumsum(0).cumsum(1)
+    sums = (
+        integral[ch:, cw:] - integral[:-ch, cw:] - integral[ch:, :-cw] + integral[:-ch, :-cw]
+    )  # sums[t, l]: the window with top-left (l, t)
+    windows = []
+    for _ in range(count):
+        t, l = np.unravel_index(int(np.argmax(sums)), sums.shape)
+        if sums[t, l] <= 0 and windows:
+            break
+        windows.append((int(l), int(t)))
+        # no overlap with the next ones
+        sums[max(0, t - ch + 1) : t + ch, max(0, l - cw + 1) : l + cw] = -1.0
+    return windows
+
+
+def alignment(camera: CameraModel, image, points_lidar, edge_points, T, keep) -> bytes:
+    """The result on the camera image at full width, and zoomed crops where the structure is.
+
+    LiDAR edge points (:func:`lidar_edge_points`) visible from ``T`` (``keep``) are drawn in
+    orange on the grey camera image, a pixel each at the image's own resolution (up to
+    :data:`ALIGNMENT_WIDTH`), then :data:`CROP_ZOOM` times enlarged in the two windows of
+    :func:`crop_windows`: there a misalignment of one or two image pixels is four to eight
+    screen pixels between the orange points and the image's own edges.
+    """
+    from matplotlib.colors import to_rgb
+
+    image = np.ascontiguousarray(image, dtype=np.uint8)
+    orange = np.round(255 * np.array(to_rgb("tab:orange"))).astype(np.uint8)
+    is_edge = np.zeros(len(points_lidar), dtype=bool)
+    is_edge[edge_points] = True
+    on_edge = np.sort(keep[is_edge[keep]])
+    uv, depth, _ = _project_visible(camera, T, points_lidar, on_edge)
+    full_w = min(camera.width, ALIGNMENT_WIDTH)
+    full_h = max(1, round(full_w * camera.height / camera.width))
+    scale = full_w / camera.width
+    full = rasterise_points(
+        _resized_rgb(image, full_w, full_h), _to_panel(uv, scale), orange, depth, 1
+    )
+    crop_w = max(48, round(CROP_SHARE * camera.width))
+    crop_h = max(32, round(crop_w * 0.6))
+    windows = crop_windows(uv, image, (crop_w, crop_h)) if len(uv) else []
+    zoom_w, zoom_h = crop_w * CROP_ZOOM, crop_h * CROP_ZOOM
+    row_h = _TITLE_PX + zoom_h if windows else 0
+    fig_w = max(full_w, len(windows) * (zoom_w + _MARGIN_PX) - _MARGIN_PX) + 2 * _MARGIN_PX
+    fig_size = (fig_w, _TITLE_PX + full_h + 2 * _MARGIN_PX + row_h + (_MARGIN_PX if windows else 0))
+    fig = _fixed_figure(*fig_size)
+    _show(
+        fig,
+        (_MARGIN_PX, _MARGIN_PX + _TITLE_PX, full_w, full_h),
+        fig_size,
+        full,
+        f"result: LiDAR edges (orange) on the image, {full_w} px wide "
+        f"({'full resolution' if scale == 1.0 else f'{scale:.2f} x'})",
+    )
+    top = 2 * _MARGIN_PX + 2 * _TITLE_PX + full_h
+    for k, (left, upper) in enumerate(windows):
+        crop = image[upper : upper + crop_h, left : left + crop_w]
+        inside = (
+            (uv[:, 0] >= left - 1) & (uv[:, 0] < left + crop_w)
+            & (uv[:, 1] >= upper - 1) & (uv[:, 1] < upper + crop_h)
+        )  # fmt: skip
+        local = uv[inside] - np.array([left, upper])
+        picture = rasterise_points(
+            _resized_rgb(crop, zoom_w, zoom_h),
+            _to_panel(local, CROP_ZOOM),
+            orange,
+            depth[inside],
+            CROP_ZOOM // 2 + 1,
+        )
+        _show(
+            fig,
+            (_MARGIN_PX + k * (zoom_w + _MARGIN_PX), top, zoom_w, zoom_h),
+            fig_size,
+            picture,
+            f"{CROP_ZOOM} x: pixels {left}-{left + crop_w}, {upper}-{upper + crop_h}",
         )
     return _png(fig, compress_level=3)
 

@@ -204,12 +204,16 @@ def _write_figures(folder: Path, quality, loaded, pairs, config, T, T_init, step
             poses.append(("initial guess", T_init, visible_subset(pair, T_init, config)))
         poses.append(("result", T, result))
         stem = _safe(pair.name or str(k))
+        edges = fg.lidar_edge_points(
+            work_pair.lidar_image.intensity, work_pair.lidar_index, pair.points_lidar
+        )
+        save(
+            f"alignment_{stem}.png",
+            fg.alignment(pair.camera, work_pair.image, pair.points_lidar, edges, T, result),
+        )
         save(
             f"overlay_{stem}.png",
             fg.overlays(pair.camera, work_pair.image, pair.points_lidar, pair.intensities, poses),
-        )
-        edges = fg.lidar_edge_points(
-            work_pair.lidar_image.intensity, work_pair.lidar_index, pair.points_lidar
         )
         save(
             f"edges_{stem}.png",
@@ -384,6 +388,11 @@ def _caption(name: str) -> str:
         return "NID along each axis around the result"
     if name == "pairs_uncertainty.png":
         return "Per-pair NID and the uncertainty"
+    if name.startswith("alignment_"):
+        return (
+            f"Alignment: LiDAR edges on the image at full width and zoomed where the structure "
+            f"is (judge 1-2 px here): {name[10:-4]}"
+        )
     if name.startswith("overlay_"):
         return f"LiDAR points on the image, by range and intensity: {name[8:-4]}"
     if name.startswith("edges_"):
