@@ -729,6 +729,46 @@ def check_real_data(ns):
     assert len(ns["_figures"]) == 6, len(ns["_figures"])
 
 
+def check_real_recording(ns):
+    from nbcalib.metrics import pose_errors
+
+    # ---- every frame is matched or left out with a reason
+    rows, matched = ns["rows"], ns["matched"]
+    assert len(rows) == (4 if ns["REAL"] else 5)  # quick mode: --pair-count 4 of 13 (real)
+    assert all(mode in ("recording", "skipped", "-") for _, mode, _, _ in rows), rows
+    if ns["guess_found"]:
+        assert 2 <= len(matched) <= len(rows) and all(n >= 1 for _, _, n, _ in matched)
+
+    # ---- evaluate's lines are pose_errors of calib.json's poses
+    calib, T_ref = ns["calib"], ns["T_ref"]
+    for label, key in (("guess", ns["stage"]), ("result", "T_lidar_camera")):
+        expected = pose_errors(calib.get_T_camera_lidar(key), T_ref)
+        for k, value in expected.items():
+            assert math.isclose(ns["errors"][label][k], value, rel_tol=1e-9, abs_tol=1e-12)
+    assert ns["result_error"] == pose_errors(calib.get_T_camera_lidar("T_lidar_camera"), T_ref)
+
+    # ---- the verdict is the report's; an ok result is within 10 cm / 1 deg
+    q = ns["quality"]
+    assert ns["report_status"] == 0
+    assert (q.verdict == "suspect") == bool(q.reasons), q.reasons
+    assert ns["n_views"] == q.n_views >= 1
+    if q.verdict == "ok":
+        err = ns["result_error"]
+        assert err["translation_error_m"] <= 0.10 and err["rotation_error_deg"] <= 1.0, err
+
+    # ---- leave-one-out: a row per frame (three views or more), deciding frames beyond it
+    if ns["loo"] is not None:
+        assert len(ns["moved_cm"]) == len(q.names)
+        u = q.uncertainty
+        for name in ns["deciding"]:
+            k = q.names.index(name)
+            assert (ns["moved_cm"][k] > u["translation_total_cm"]
+                    or ns["moved_deg"][k] > u["rotation_total_deg"])  # fmt: skip
+
+    # ---- the vote by hand: as many votes as distinct rotations (at most two), each explained
+    assert len(ns["votes"]) <= 2 and all(v.support >= 0 for v in ns["votes"])
+
+
 def check_your_own_sensors(ns):
     from nbcalib.metrics import pose_errors
 
@@ -835,4 +875,5 @@ CHECKS = {
     "08_pairs_and_quality": check_quality_report,
     "09_real_data": check_real_data,
     "10_your_own_sensors": check_your_own_sensors,
+    "11_real_recording": check_real_recording,
 }

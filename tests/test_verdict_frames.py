@@ -23,6 +23,19 @@ def test_images_of_one_view_share_a_label_and_other_views_do_not():
     assert views([a]).tolist() == [0]
 
 
+def test_a_slow_drive_past_one_scene_is_one_scene():
+    """Neighbours alike, ends not: a chain of alike frames is one scene (single linkage)."""
+    from scipy.ndimage import gaussian_filter
+
+    rng = np.random.default_rng(2)
+    wide = gaussian_filter(rng.normal(0, 1, (120, 900)), 20)  # a street of smooth texture
+    wide = 128 + 60 * wide / wide.std()
+    frames = [np.clip(wide[:, k : k + 160], 0, 255).astype(np.uint8) for k in range(0, 700, 5)]
+    thumbs_end = views([frames[0], frames[-1]])
+    assert thumbs_end.tolist() == [0, 1]  # the ends alone: two scenes
+    assert set(views(frames).tolist()) == {0}
+
+
 def test_leave_one_out_is_the_minimum_of_the_other_pairs():
     """Quadratic pairs: the Newton step is the exact minimum of the sum without the pair."""
     rng = np.random.default_rng(1)
