@@ -149,7 +149,8 @@ print(f"{len(matched)} of {len(rows)} frames matched with the learned matcher")
 # nearest neighbours only (notebook 5 built the views), and each view's rotation-only RANSAC
 # gives a rotation. Every such rotation is then scored by the screened correspondences of *all*
 # frames it explains. Wrong matches scatter over rotations; right ones pile up on one. Here we
-# redo it on two frames and compare the winner with the reference rotation.
+# redo it on the first five frames (four in quick mode) and compare each frame's own best view
+# and the vote's winner with the reference rotation.
 
 # %%
 from nbcalib.initial_guess.config import InitialGuessConfig
@@ -163,7 +164,7 @@ work = WorkDir(WORK)
 camera = work.require_preprocessed().camera_model()
 origin = get_virtual_camera(work.read_calib()).origin
 config = MatchConfig(matcher=resolve_matcher("auto"))
-pairs = work.load_pairs(work.names()[:2])
+pairs = work.load_pairs(work.names()[:5])
 screens = [
     screen_frame(camera, pair, config, ransac_threshold=5.0, origin=origin) for pair in pairs
 ]
@@ -176,7 +177,16 @@ for pair, best in zip(pairs, own_best):
         print(f"{pair.name}: its own best view is {angle:.1f} deg from the reference rotation")
 vote_angles = [rotation_angle_deg(T_ref[:3, :3].T @ v.R_camera_lidar) for v in votes]
 for vote, angle in zip(votes, vote_angles):
-    print(f"vote: {vote.support} correspondences of both frames, {angle:.1f} deg from it")
+    print(f"vote: {vote.support} correspondences of these frames, {angle:.1f} deg from it")
+own_right = sum(
+    best is not None and rotation_angle_deg(T_ref[:3, :3].T @ best.R_camera_lidar) < 5.0
+    for best in own_best
+)
+print(
+    f"{own_right} of {len(pairs)} frames' own best views are within 5 deg of the reference; the "
+    + ("vote's winner is too." if vote_angles and vote_angles[0] < 5.0 else
+       "vote's winner is not: these few frames' screens do not agree on it.")  # fmt: skip
+)
 
 # %% [markdown]
 # ## The guess and the result against the reference
@@ -186,9 +196,9 @@ for vote, angle in zip(votes, vote_angles):
 
 # %%
 calib = read_calib_json(WORK / "calib.json")
-stage = "init_T_lidar_camera_auto" if guess_found else "init_T_lidar_camera"
-errors = {}
-for label, key in (("guess", stage), ("result", "T_lidar_camera")):
+stages = [("guess", "init_T_lidar_camera_auto")] if guess_found else []
+errors = {} if guess_found else {"start": pose_errors(rough, T_ref)}  # the rough --init
+for label, key in [*stages, ("result", "T_lidar_camera")]:
     _, line = nbcalib_command("evaluate", WORK, "--ground-truth", REFERENCE, "--stage", key)
     errors[label] = json.loads(line.strip().splitlines()[-1])
 result_error = pose_errors(calib.get_T_camera_lidar("T_lidar_camera"), T_ref)

@@ -741,10 +741,13 @@ def check_real_recording(ns):
 
     # ---- evaluate's lines are pose_errors of calib.json's poses
     calib, T_ref = ns["calib"], ns["T_ref"]
-    for label, key in (("guess", ns["stage"]), ("result", "T_lidar_camera")):
+    for label, key in [*ns["stages"], ("result", "T_lidar_camera")]:
         expected = pose_errors(calib.get_T_camera_lidar(key), T_ref)
         for k, value in expected.items():
             assert math.isclose(ns["errors"][label][k], value, rel_tol=1e-9, abs_tol=1e-12)
+    if not ns["guess_found"]:  # the rough start: exactly 2 deg / 10 cm off
+        assert math.isclose(ns["errors"]["start"]["rotation_error_deg"], 2.0, rel_tol=1e-9)
+        assert math.isclose(ns["errors"]["start"]["translation_error_m"], 0.10, rel_tol=1e-9)
     assert ns["result_error"] == pose_errors(calib.get_T_camera_lidar("T_lidar_camera"), T_ref)
 
     # ---- the verdict is the report's; an ok result is within 10 cm / 1 deg
