@@ -184,8 +184,11 @@ own_right = sum(
 )
 print(
     f"{own_right} of {len(pairs)} frames' own best views are within 5 deg of the reference; the "
-    + ("vote's winner is too." if vote_angles and vote_angles[0] < 5.0 else
-       "vote's winner is not: these few frames' screens do not agree on it.")  # fmt: skip
+    + (
+        "vote's winner is too."
+        if vote_angles and vote_angles[0] < 5.0
+        else "vote's winner is not: these few frames' screens do not agree on it."
+    )
 )
 
 # %% [markdown]
@@ -205,8 +208,11 @@ result_error = pose_errors(calib.get_T_camera_lidar("T_lidar_camera"), T_ref)
 print(
     f"the result is {100 * result_error['translation_error_m']:.2f} cm and "
     f"{result_error['rotation_error_deg']:.3f} deg from the reference"
-    + (" (KITTI's own calibration, trusted to a few tenths of a degree and centimetres)"
-       if REAL else " (the exact answer)")  # fmt: skip
+    + (
+        " (KITTI's own calibration, trusted to a few tenths of a degree and centimetres)"
+        if REAL
+        else " (the exact answer)"
+    )
 )
 
 # %% [markdown]
