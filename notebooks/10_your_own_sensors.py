@@ -626,3 +626,6 @@ print(ring_urdf)
 # - the camera ring: the bag has both cameras' topics, the run calibrates both (one joint rig
 #   pose), `evaluate` prints the rig's line then one per camera, each within 5 cm / 0.7
 #   degrees and closer than the start, and the URDF has a joint per camera.
+#
+# Next: [11_real_recording](11_real_recording.py): a real recording of many frames calibrated
+# in one command, with no start given, and the verdict the frames give.

@@ -12,8 +12,10 @@ Manual (``--manual FILE``): the picked correspondences of FILE
 The matcher's confidences weigh the matches in the LM cost (``--no-confidence-weights``: all
 equal, as paper Eq. 1 and the reference toolbox). Quality figures (correspondences, inliers,
 RMS, success) are stored under ``nbcalib.initial_guess.<stage>`` of ``calib.json``. A guess
-with fewer than ``--min-inliers`` inliers is not written (exit status 2) unless ``--force`` is
-given.
+with fewer than ``--min-inliers`` inliers, or one another rotation explains nearly as well, is not
+written (exit status 2) unless ``--force`` is given. A guess whose precision is in doubt (its
+bounds times ``--precision-scale`` beyond fine registration's start) is written and recorded as
+``precise: false``: fine registration refines it and the report judges the result.
 """
 
 from __future__ import annotations
