@@ -734,7 +734,7 @@ def check_real_recording(ns):
 
     # ---- every frame is matched or left out with a reason
     rows, matched = ns["rows"], ns["matched"]
-    assert len(rows) == (4 if ns["REAL"] else 5)  # quick mode: --pair-count 4 of 13 (real)
+    assert len(rows) == (4 if ns["QUICK"] else len(ns["frame_names"]))  # quick: --pair-count 4
     assert all(mode in ("recording", "skipped", "-") for _, mode, _, _ in rows), rows
     if ns["guess_found"]:
         assert 2 <= len(matched) <= len(rows) and all(n >= 1 for _, _, n, _ in matched)
