@@ -268,9 +268,11 @@ def _uncertainty(covariance: np.ndarray, confidence: float) -> dict:
 #: Two images whose standardised 64-pixel-wide thumbnails correlate this much show one scene; so
 #: do images linked by a chain of such pairs. Measured: the ACFR poses (a parked car) correlate
 #: 0.94-1.00; KITTI raw frames at walking pace 0.95-0.98 with their neighbours (0.57 first to
-#: last: one scene seen a little further on at each frame); KITTI odometry and Waymo frames of
-#: other streets 0.68 at most.
-SAME_VIEW = 0.9
+#: last: one scene seen a little further on at each frame), 0.86-0.96 every other frame;
+#: KITTI odometry and Waymo frames of other streets, and synthetic pairs of a room or a street
+#: from other rig poses, 0.68 at most. At 0.9, ten KITTI raw frames (every other one) fell into
+#: three views, were judged by their agreement, and a result 24 cm / 2.5 deg off was called ok.
+SAME_VIEW = 0.8
 
 
 def _thumbnail(image: np.ndarray, width: int = 64) -> np.ndarray:
