@@ -54,7 +54,7 @@ from pathlib import Path
 
 import numpy as np
 
-from nbcalib.io.calib_json import read_ground_truth
+from nbcalib.io.ground_truth import read_ground_truth
 from nbcalib.transforms import invert_T, offset_pose, pose_to_xyz_quat
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"

@@ -44,7 +44,7 @@ from bench_bias import DATA, offset_start, real_sets
 
 from nbcalib.camera import create_camera
 from nbcalib.config import CalibrationConfig, set_values
-from nbcalib.io.calib_json import read_ground_truth
+from nbcalib.io.ground_truth import read_ground_truth
 from nbcalib.registration.config import RefineConfig
 from nbcalib.registration.costs import build_cost
 from nbcalib.registration.refine import RegistrationPair, refine

@@ -46,7 +46,7 @@ import numpy as np
 # the starts of the in-process benchmark: the same seeded directions, exactly sized
 from bench_real_registration import perturb, perturbations
 
-from nbcalib.io.calib_json import read_ground_truth
+from nbcalib.io.ground_truth import read_ground_truth
 from nbcalib.transforms import invert_T, pose_to_xyz_quat
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"

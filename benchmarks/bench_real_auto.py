@@ -36,7 +36,7 @@ from pathlib import Path
 
 from bench_real import DATA, KITTI, KITTI_CALIB, PJLAB, sets
 
-from nbcalib.io.calib_json import read_ground_truth
+from nbcalib.io.ground_truth import read_ground_truth
 
 BAGS = (
     "kitti_2011_09_26_udacity_5frames.bag",

@@ -83,7 +83,7 @@ def nbcalib(*args) -> subprocess.CompletedProcess:
 
 
 def reference_pose(path: Path) -> np.ndarray:
-    from nbcalib.io.calib_json import read_ground_truth
+    from nbcalib.io.ground_truth import read_ground_truth
 
     return read_ground_truth(path)
 

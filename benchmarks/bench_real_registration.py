@@ -48,8 +48,8 @@ from pathlib import Path
 import numpy as np
 
 from nbcalib.camera import CameraModel
-from nbcalib.io.calib_json import read_ground_truth
 from nbcalib.io.camera_file import load_camera
+from nbcalib.io.ground_truth import read_ground_truth
 from nbcalib.metrics import pose_errors
 from nbcalib.preprocess.config import PreprocessConfig
 from nbcalib.preprocess.inputs import gather_files

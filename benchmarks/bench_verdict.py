@@ -55,7 +55,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from bench_bias import init_arg, nbcalib, offset_start, real_sets
 
 from nbcalib.commands.synth import CAMERAS, LIDARS, SCENES
-from nbcalib.io.calib_json import read_ground_truth
+from nbcalib.io.ground_truth import read_ground_truth
 from nbcalib.transforms import invert_T, pose_from_xyz_quat, se3_log
 
 REAL_DATA = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"

@@ -33,8 +33,8 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 from nbcalib.io.bag import open_bag
-from nbcalib.io.calib_json import read_ground_truth
 from nbcalib.io.camera_file import load_camera
+from nbcalib.io.ground_truth import read_ground_truth
 from nbcalib.io.image import read_image
 from nbcalib.io.pcd import read_pcd_fields, write_pcd
 from nbcalib.io.pointcloud import read_pointcloud, select_intensity_field

@@ -38,8 +38,9 @@ import matplotlib.pyplot as plt
 import numpy as np
 
 import nbcalib
-from nbcalib.io.calib_json import read_calib_json, read_ground_truth
+from nbcalib.io.calib_json import read_calib_json
 from nbcalib.io.camera_file import load_camera
+from nbcalib.io.ground_truth import read_ground_truth
 from nbcalib.io.image import read_image
 from nbcalib.io.pointcloud import read_pointcloud
 from nbcalib.metrics import pose_errors

@@ -40,8 +40,9 @@ import numpy as np
 
 from nbcalib.initial_guess.picker import ManualPicker
 from nbcalib.io.bag import open_bag, read_images
-from nbcalib.io.calib_json import read_calib_json, read_ground_truth
+from nbcalib.io.calib_json import read_calib_json
 from nbcalib.io.camera_file import load_camera
+from nbcalib.io.ground_truth import read_ground_truth
 from nbcalib.io.image import read_image
 from nbcalib.matching.correspondences import lift_lidar_pixels
 from nbcalib.metrics import pose_errors

@@ -36,7 +36,8 @@ import json
 import matplotlib.pyplot as plt
 import numpy as np
 
-from nbcalib.io.calib_json import read_calib_json, read_ground_truth
+from nbcalib.io.calib_json import read_calib_json
+from nbcalib.io.ground_truth import read_ground_truth
 from nbcalib.io.image import read_image
 from nbcalib.metrics import pose_errors
 from nbcalib.report import load_quality

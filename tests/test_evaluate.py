@@ -19,11 +19,10 @@ from nbcalib.io.calib_json import (
     MANUAL_STAGE,
     CalibFile,
     read_calib_json,
-    read_ground_truth,
     values_from_T_camera_lidar,
     write_calib_json,
-    write_ground_truth,
 )
+from nbcalib.io.ground_truth import read_ground_truth, write_ground_truth
 from nbcalib.metrics import pose_errors
 
 DATA = Path(__file__).parent / "data"

@@ -34,8 +34,9 @@ from hypothesis.extra import numpy as hnp
 
 from nbcalib.camera import CameraModel, create_camera
 from nbcalib.errors import InputError
-from nbcalib.io.calib_json import read_calib_json, read_ground_truth
+from nbcalib.io.calib_json import read_calib_json
 from nbcalib.io.camera_file import load_camera
+from nbcalib.io.ground_truth import read_ground_truth
 from nbcalib.io.image import read_image
 from nbcalib.io.pcd import write_pcd
 from nbcalib.io.pointcloud import POINTCLOUD_SUFFIXES, PointCloud, read_pointcloud

@@ -56,7 +56,7 @@ def test_a_ring_shares_the_scans_and_its_first_camera_is_the_one_camera_rig():
 
 def test_a_ring_bag_has_a_topic_pair_per_camera_and_the_truth_of_each(tmp_path):
     from nbcalib.io.bag import list_topics
-    from nbcalib.io.calib_json import read_ground_truth, read_ground_truth_cameras
+    from nbcalib.io.ground_truth import read_ground_truth, read_ground_truth_cameras
 
     config = RigConfig(cameras=("pinhole", "fisheye:128x96"), **SMALL)
     export_dataset(config, tmp_path, fmt="bag2")

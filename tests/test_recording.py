@@ -163,7 +163,7 @@ def test_a_synthetic_recording_is_matched_through_the_cli(tmp_path):
     calib = json.loads((work / "calib.json").read_text())
     info = json.loads((work / f"{calib['meta']['bag_names'][0]}_matches.json").read_text())
     assert info["nbcalib"]["mode"] in ("recording", "skipped")
-    from nbcalib.io.calib_json import read_ground_truth
+    from nbcalib.io.ground_truth import read_ground_truth
     from nbcalib.workdir import WorkDir
 
     guess = WorkDir(work).read_calib().get_T_camera_lidar("init_T_lidar_camera_auto")

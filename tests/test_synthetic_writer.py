@@ -11,8 +11,8 @@ from numpy.testing import assert_allclose, assert_array_equal
 
 from nbcalib.cli import main
 from nbcalib.io.bag import read_camera_info, read_images, read_pointclouds, read_tf_static
-from nbcalib.io.calib_json import read_ground_truth
 from nbcalib.io.camera_file import load_camera
+from nbcalib.io.ground_truth import read_ground_truth
 from nbcalib.io.image import read_image
 from nbcalib.io.pointcloud import read_pointcloud
 from nbcalib.synthetic import RigConfig, lidar_preset

@@ -149,7 +149,7 @@ def run(args: argparse.Namespace) -> int:
     from nbcalib.commands import evaluate, synth
     from nbcalib.config import CalibrationConfig, set_values
     from nbcalib.errors import InputError
-    from nbcalib.io.calib_json import read_ground_truth
+    from nbcalib.io.ground_truth import read_ground_truth
     from nbcalib.matching.match import available_matchers, resolve_matcher
     from nbcalib.pipeline import Calibrator
     from nbcalib.workdir import check_writable

@@ -80,7 +80,7 @@ def add_parser(subparsers, formatter_class=argparse.HelpFormatter) -> argparse.A
 
 def run(args: argparse.Namespace) -> int:
     """Print the errors of the work directory's result as one JSON line; returns 0."""
-    from nbcalib.io.calib_json import read_ground_truth
+    from nbcalib.io.ground_truth import read_ground_truth
     from nbcalib.rig_pipeline import read_rig_job
 
     workdir = Path(args.workdir)
@@ -118,7 +118,7 @@ def _evaluate(workdir: Path, T_camera_lidar_true, args) -> tuple[str, dict]:
 
 def _evaluate_rig(args, workdir: Path, job: dict) -> int:
     """The rig's line, then a line per camera (module docstring)."""
-    from nbcalib.io.calib_json import read_ground_truth_cameras
+    from nbcalib.io.ground_truth import read_ground_truth_cameras
 
     truth = read_ground_truth_cameras(args.ground_truth)
     names = [c["name"] for c in job["cameras"]]
