@@ -63,7 +63,7 @@ class ArrayInputs:
 
     def gather(self, config):
         """(pairs, camera, data_path) as :meth:`nbcalib.preprocess.inputs.InputSpec.gather`."""
-        from nbcalib.preprocess.inputs import PairInput
+        from nbcalib.preprocess.sources import PairInput
 
         grey = [_load_image(image) for image in self.images]
         camera = _load_camera(self.camera, grey[0].shape)

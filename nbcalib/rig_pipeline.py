@@ -44,13 +44,8 @@ import numpy as np
 from nbcalib.config import CalibrationConfig
 from nbcalib.errors import InputError
 from nbcalib.preprocess.config import PreprocessConfig
-from nbcalib.preprocess.inputs import (
-    InputSpec,
-    PairInput,
-    SharedClouds,
-    bag_name,
-    classify_inputs,
-)
+from nbcalib.preprocess.inputs import InputSpec
+from nbcalib.preprocess.sources import PairInput, SharedClouds, bag_name, classify_inputs
 from nbcalib.products import Start
 from nbcalib.transforms import invert_T, pose_error, pose_to_xyz_quat
 
@@ -180,7 +175,7 @@ class _Recording:
 
     def _read(self, config: PreprocessConfig) -> None:
         from nbcalib.io.bag import open_bag
-        from nbcalib.preprocess.inputs import bag_scans, first_image
+        from nbcalib.preprocess.sources import bag_scans, first_image
 
         bags = sorted(classify_inputs(self.spec.inputs)[0], key=lambda p: p.name)
         pairs: dict[str, list[PairInput]] = {c.name: [] for c in self.cameras}

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from nbcalib.errors import InputError
-from nbcalib.io.ply import read_ply, write_ply
+from nbcalib.io.ply import write_ply
 from nbcalib.io.pointcloud import read_pointcloud
 
 
@@ -32,7 +32,7 @@ def test_ply_round_trip(tmp_path, rng, encoding):
     points = rng.normal(size=(300, 3)) * 20
     intensity = rng.random(300)
     write_ply(tmp_path / "a.ply", points, intensity, encoding=encoding)
-    cloud = read_ply(tmp_path / "a.ply")
+    cloud = read_pointcloud(tmp_path / "a.ply")
     assert np.array_equal(cloud.points, points.astype(np.float32).astype(np.float64))
     assert np.array_equal(cloud.intensity, intensity.astype(np.float32).astype(np.float64))
     no_intensity = tmp_path / "b.ply"
@@ -63,7 +63,9 @@ def test_ply_ascii_with_faces(tmp_path):
         "0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n"
     )
     (tmp_path / "t.ply").write_text(text)
-    assert np.array_equal(read_ply(tmp_path / "t.ply").points, [[0, 0, 0], [1, 0, 0], [0, 1, 0]])
+    assert np.array_equal(
+        read_pointcloud(tmp_path / "t.ply").points, [[0, 0, 0], [1, 0, 0], [0, 1, 0]]
+    )
 
 
 @pytest.mark.parametrize(

@@ -12,7 +12,7 @@ from nbcalib.kernels.synthetic_texture import LUMA
 from nbcalib.reference.raycast import cast_rays as cast_rays_reference
 from nbcalib.synthetic.builder import SceneBuilder
 from nbcalib.synthetic.bvh import build_bvh, primitive_bounds
-from nbcalib.synthetic.scene import make_scene
+from nbcalib.synthetic.scenes import make_scene
 from nbcalib.synthetic.texture import Material, surface_properties
 from nbcalib.transforms import random_rotation
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from nbcalib import warmup
+from nbcalib import warmup, warmup_job
 
 
 def test_no_process_when_the_cache_is_warm_or_switched_off(monkeypatch):
@@ -16,11 +16,11 @@ def test_no_process_when_the_cache_is_warm_or_switched_off(monkeypatch):
     assert not started
     monkeypatch.delenv("NBCALIB_NO_WARMUP")
     warmup.start()
-    assert started and started[0][0][1:] == ["-m", "nbcalib.warmup"]
+    assert started and started[0][0][1:] == ["-m", "nbcalib.warmup_job"]
 
 
 def test_the_tiny_job_runs_through_every_stage_and_leaves_the_cache_warm():
-    warmup.tiny_job()  # raises if any stage fails on it
+    warmup_job.tiny_job()  # raises if any stage fails on it
     assert warmup.cache_is_warm()
 
 

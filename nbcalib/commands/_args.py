@@ -110,7 +110,7 @@ def split_workdir(inputs, points, images=None):
     InputError
         No WORKDIR, or a WORKDIR that names a data file.
     """
-    from nbcalib.preprocess.inputs import CLOUD_SUFFIXES, IMAGE_SUFFIXES
+    from nbcalib.preprocess.sources import CLOUD_SUFFIXES, IMAGE_SUFFIXES
 
     inputs, points = [str(p) for p in inputs or []], [str(p) for p in points or []]
     image_list = [str(p) for p in images or []]
@@ -204,15 +204,6 @@ def parse_start(text, uncertainty=None, option: str = "--init"):
         return replace(start, uncertainty=check_uncertainty(uncertainty, option))
     except ValueError as exc:
         raise InputError(f"{option}-uncertainty: {exc}") from None
-
-
-#: Help of ``--init-uncertainty`` (``calibrate`` and ``run``).
-INIT_UNCERTAINTY_HELP = (
-    "how far --init may be from the truth (metres of camera centre, degrees), at the report's "
-    "confidence; the verdict calls a result suspect that moved farther from the start than "
-    "this and its own uncertainty allow (default: the trust region, --trust-translation / "
-    "--trust-rotation)"
-)
 
 
 def check_model_dir(path) -> None:

@@ -25,11 +25,13 @@ log = logging.getLogger("nbcalib")
 __all__ = [
     "ASSESS",
     "INITIAL_GUESS",
+    "INIT_UNCERTAINTY_HELP",
     "INPUT_OPTIONS",
     "MATCHING",
     "PREPROCESS",
     "RECORDING_OPTIONS",
     "REFINE",
+    "RUN_OPTIONS",
     "Option",
     "add_options",
     "build_config",
@@ -274,6 +276,44 @@ ASSESS = (
 SETTING_OPTIONS = {o.flag: o for o in (*PREPROCESS, *MATCHING, *INITIAL_GUESS, *REFINE, *ASSESS)}
 
 
+#: Help of ``--init-uncertainty`` (``calibrate`` and ``run``).
+INIT_UNCERTAINTY_HELP = (
+    "how far --init may be from the truth (metres of camera centre, degrees), at the report's "
+    "confidence; the verdict calls a result suspect that moved farther from the start than "
+    "this and its own uncertainty allow (default: the trust region, --trust-translation / "
+    "--trust-rotation)"
+)
+
+
+#: Options of ``run`` itself (not settings): how the job runs and where it starts.
+RUN_OPTIONS = (
+    Option("--config", "", "settings from a TOML or YAML file", "FILE"),
+    Option("--force", "", "recompute every stage, even a finished result", value=True),
+    Option("--from", "", "recompute from STAGE on", "STAGE"),
+    Option("--until", "", "stop after STAGE (e.g. --until initial-guess to check the guess)",
+           "STAGE"),
+    Option("--no-matching", "",
+           "skip find-matches and the automatic guess: start from --init (or --manual)",
+           value=True),
+    Option("--no-report", "", "skip the report", value=True),
+    Option("--init", "", "T_lidar_camera x,y,z,qx,qy,qz,qw: the start when the automatic guess "
+           "fails (with --no-matching: the start)", "X,Y,Z,QX,QY,QZ,QW"),
+    Option("--init-uncertainty", "", INIT_UNCERTAINTY_HELP, ("M", "DEG")),
+    Option("--manual", "", "hand-picked correspondences (nbcalib initial-guess --help)", "FILE"),
+    Option("--prior", "", "rough T_lidar_camera that matching renders its views around",
+           "X,Y,Z,QX,QY,QZ,QW"),
+    Option("--model-dir", "", "exported models (default: $NBCALIB_MODEL_DIR or the user cache)",
+           "DIR"),
+    Option("--camera-topics", "", "several cameras: their image topics, comma-separated "
+           "(default: every image topic of a bag that has several)", "T1,T2,..."),
+    Option("--rig", "", "several cameras with known camera-to-camera extrinsics (a Kalibr "
+           "camchain or an nbcalib rig file): one rig pose from every camera", "FILE"),
+    Option("--camera-image", "", "several cameras from files: a camera's name, its image and "
+           "its camera file, once per camera, with the point clouds as INPUT or --points",
+           ("NAME", "IMAGE", "CAMERA")),
+)  # fmt: skip
+
+
 def _choices(option: Option):
     if option.choices is not None:
         return option.choices
@@ -354,10 +394,8 @@ def file_settings(data: dict, path) -> tuple[dict, dict]:
     InputError
         An unknown table or key, or a switch whose value is not true or false; names ``path``.
     """
-    from nbcalib.commands import run as run_command
-
     stage_tables = ("run", "preprocess", "find-matches", "initial-guess", "calibrate", "report")
-    others = {o.flag: o for o in (*INPUT_OPTIONS, *RECORDING_OPTIONS, *run_command.RUN_OPTIONS)}
+    others = {o.flag: o for o in (*INPUT_OPTIONS, *RECORDING_OPTIONS, *RUN_OPTIONS)}
     settings: dict[str, Any] = {}
     other: dict[str, Any] = {}
     entries = []

@@ -40,8 +40,8 @@ nbcalib.calibration.failed) and exits with status 3; start closer or widen the r
 
 def add_parser(subparsers, formatter_class) -> argparse.ArgumentParser:
     """Register ``calibrate``."""
-    from nbcalib.commands._args import INIT_UNCERTAINTY_HELP, add_force_argument
-    from nbcalib.commands._options import REFINE, add_options
+    from nbcalib.commands._args import add_force_argument
+    from nbcalib.commands._options import INIT_UNCERTAINTY_HELP, REFINE, add_options
 
     p = subparsers.add_parser(
         "calibrate",

@@ -14,7 +14,6 @@ import argparse
 import logging
 
 from nbcalib.commands._args import (
-    INIT_UNCERTAINTY_HELP,
     add_input_arguments,
     add_verbosity_arguments,
     check_model_dir,
@@ -29,7 +28,7 @@ from nbcalib.commands._options import (
     MATCHING,
     PREPROCESS,
     REFINE,
-    Option,
+    RUN_OPTIONS,
     add_options,
     build_config,
 )
@@ -85,34 +84,6 @@ job.toml (tables are the config's sections; keys their settings, or option names
   [refine]
   optimizer = "nelder_mead"
 """
-
-#: Options of ``run`` itself (not settings): how the job runs and where it starts.
-RUN_OPTIONS = (
-    Option("--config", "", "settings from a TOML or YAML file", "FILE"),
-    Option("--force", "", "recompute every stage, even a finished result", value=True),
-    Option("--from", "", "recompute from STAGE on", "STAGE"),
-    Option("--until", "", "stop after STAGE (e.g. --until initial-guess to check the guess)",
-           "STAGE"),
-    Option("--no-matching", "",
-           "skip find-matches and the automatic guess: start from --init (or --manual)",
-           value=True),
-    Option("--no-report", "", "skip the report", value=True),
-    Option("--init", "", "T_lidar_camera x,y,z,qx,qy,qz,qw: the start when the automatic guess "
-           "fails (with --no-matching: the start)", "X,Y,Z,QX,QY,QZ,QW"),
-    Option("--init-uncertainty", "", INIT_UNCERTAINTY_HELP, ("M", "DEG")),
-    Option("--manual", "", "hand-picked correspondences (nbcalib initial-guess --help)", "FILE"),
-    Option("--prior", "", "rough T_lidar_camera that matching renders its views around",
-           "X,Y,Z,QX,QY,QZ,QW"),
-    Option("--model-dir", "", "exported models (default: $NBCALIB_MODEL_DIR or the user cache)",
-           "DIR"),
-    Option("--camera-topics", "", "several cameras: their image topics, comma-separated "
-           "(default: every image topic of a bag that has several)", "T1,T2,..."),
-    Option("--rig", "", "several cameras with known camera-to-camera extrinsics (a Kalibr "
-           "camchain or an nbcalib rig file): one rig pose from every camera", "FILE"),
-    Option("--camera-image", "", "several cameras from files: a camera's name, its image and "
-           "its camera file, once per camera, with the point clouds as INPUT or --points",
-           ("NAME", "IMAGE", "CAMERA")),
-)  # fmt: skip
 
 #: Inputs a config file may give by option name (``frames = "kitti/"``), as on the command line.
 FILE_INPUT_KEYS = (

@@ -56,22 +56,19 @@ import numpy as np
 
 from nbcalib.errors import InputError
 from nbcalib.io._files import write_text_atomic
-from nbcalib.io.job_record import CameraEntry, JobRecord
+from nbcalib.io.job_record import (  # the result keys: re-exported, calib.json's vocabulary
+    AUTO_STAGE,
+    FINAL_STAGE,
+    INITIAL_STAGES,
+    MANUAL_STAGE,
+    STAGES,
+    CameraEntry,
+    JobRecord,
+)
 from nbcalib.transforms import invert_T, pose_from_xyz_quat, pose_to_xyz_quat
 
 if TYPE_CHECKING:
     from nbcalib.camera import CameraModel
-
-#: Key of the final result (written by ``calibrate``).
-FINAL_STAGE = "T_lidar_camera"
-#: Key of the manual initial guess.
-MANUAL_STAGE = "init_T_lidar_camera"
-#: Key of the automatic initial guess.
-AUTO_STAGE = "init_T_lidar_camera_auto"
-#: Every result key, final first.
-STAGES = (FINAL_STAGE, MANUAL_STAGE, AUTO_STAGE)
-#: Initial guesses in the order the reference's ``calibrate`` prefers them.
-INITIAL_STAGES = (MANUAL_STAGE, AUTO_STAGE)
 
 #: Keys of the reference's ``camera`` entry.
 CAMERA_KEYS = ("camera_model", "intrinsics", "distortion_coeffs")

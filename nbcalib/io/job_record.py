@@ -40,7 +40,25 @@ from collections.abc import Callable
 from dataclasses import dataclass, field, fields
 from typing import Any
 
+# The keys of calib.json's ``results`` (re-exported by :mod:`nbcalib.io.calib_json`).
+
+#: Key of the final result (written by ``calibrate``).
+FINAL_STAGE = "T_lidar_camera"
+#: Key of the manual initial guess.
+MANUAL_STAGE = "init_T_lidar_camera"
+#: Key of the automatic initial guess.
+AUTO_STAGE = "init_T_lidar_camera_auto"
+#: Every result key, final first.
+STAGES = (FINAL_STAGE, MANUAL_STAGE, AUTO_STAGE)
+#: Initial guesses in the order the reference's ``calibrate`` prefers them.
+INITIAL_STAGES = (MANUAL_STAGE, AUTO_STAGE)
+
 __all__ = [
+    "AUTO_STAGE",
+    "FINAL_STAGE",
+    "INITIAL_STAGES",
+    "MANUAL_STAGE",
+    "STAGES",
     "CalibrationRecord",
     "CameraEntry",
     "GuessFigures",
@@ -281,8 +299,6 @@ class InitialGuessRecord:
     @classmethod
     def from_dict(cls, data: dict) -> InitialGuessRecord:
         """The record of a parsed ``nbcalib.initial_guess``."""
-        from nbcalib.io.calib_json import INITIAL_STAGES
-
         checks = {"failed": _is_str, **{stage: _is_dict for stage in INITIAL_STAGES}}
         known, other = _split(data, checks)
         failed = known.pop("failed", None)

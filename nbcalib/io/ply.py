@@ -1,8 +1,10 @@
 """PLY point cloud files: the ``vertex`` element, ascii or binary (little or big endian).
 
 :func:`read_ply_fields` returns every vertex property (faces and later elements are ignored);
-:func:`read_ply` makes a :class:`~nbcalib.io.pointcloud.PointCloud` of them; :func:`write_ply`
-writes float32 ``x, y, z`` (and ``intensity``) vertices with the reference's header, atomically.
+:func:`~nbcalib.io.pointcloud.read_pointcloud` makes a
+:class:`~nbcalib.io.pointcloud.PointCloud` of them (this module knows the format only);
+:func:`write_ply` writes float32 ``x, y, z`` (and ``intensity``) vertices with the reference's
+header, atomically.
 """
 
 from __future__ import annotations
@@ -17,7 +19,6 @@ import numpy as np
 from nbcalib.errors import InputError
 from nbcalib.io._fields import ascii_rows, fill_table, struct_to_fields
 from nbcalib.io._files import read_bytes, write_bytes_atomic
-from nbcalib.io.pointcloud import PointCloud, pointcloud_from_file_fields
 
 _PLY_TYPES = {
     "char": "i1",
@@ -142,21 +143,6 @@ def read_ply_fields(path) -> dict[str, np.ndarray]:
         if array.shape[0] < n:
             raise InputError(f"expected {n} vertices, file holds {array.shape[0]}", path=path)
     return struct_to_fields(array)
-
-
-def read_ply(
-    path, *, intensity_channel: str | None = "auto", time_field: str | None = "auto"
-) -> PointCloud:
-    """The vertices of a PLY file (binary little/big endian or ascii) as a :class:`PointCloud`.
-
-    Intensity and time fields follow :func:`~nbcalib.io.pointcloud.read_pointcloud`'s rules.
-    """
-    return pointcloud_from_file_fields(
-        read_ply_fields(path),
-        Path(path),
-        intensity_channel=intensity_channel,
-        time_field=time_field,
-    )
 
 
 def write_ply(

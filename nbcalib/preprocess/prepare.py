@@ -25,7 +25,7 @@ from nbcalib._threads import thread_map
 from nbcalib.camera import CameraModel
 from nbcalib.errors import InputError
 from nbcalib.preprocess.config import PreprocessConfig
-from nbcalib.preprocess.inputs import PairInput
+from nbcalib.preprocess.sources import PairInput
 from nbcalib.products import PairData, VirtualCamera
 
 __all__ = ["check_pairs", "choose_mode", "prepare_pair", "render_pairs"]

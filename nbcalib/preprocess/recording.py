@@ -230,7 +230,7 @@ def _make_pairs(
     ``load_scans`` maps scan indices to point clouds, ``load_images`` image indices to
     ``(image, source)``; every scan is read once (pairs that share it share the object).
     """
-    from nbcalib.preprocess.inputs import PairInput
+    from nbcalib.preprocess.sources import PairInput
 
     if not shots:
         raise InputError("no image to make a pair at", where)
@@ -281,7 +281,7 @@ def _make_pairs(
 
 def _file_loaders(scan_paths: Sequence[Path], image_paths: Sequence[Path], config):
     from nbcalib.io.image import read_image
-    from nbcalib.preprocess.inputs import read_scan
+    from nbcalib.preprocess.sources import read_scan
 
     def load_scans(indices):
         channel = config.intensity_channel
@@ -325,7 +325,7 @@ def gather_frames(folder, config: PreprocessConfig, *, every=None, pair_count=No
         message names the frame), a frame with several of either, or KITTI timestamps that do
         not fit the files.
     """
-    from nbcalib.preprocess.inputs import CLOUD_SUFFIXES, IMAGE_SUFFIXES
+    from nbcalib.preprocess.sources import CLOUD_SUFFIXES, IMAGE_SUFFIXES
 
     folder = Path(folder)
     if not folder.is_dir():
@@ -375,7 +375,7 @@ def _kitti_raw_frames(folder: Path, config: PreprocessConfig):
     ``timestamps.txt`` (line ``i`` for the file named ``i``), each image's fraction of its sweep
     comes from them; else it is ``image_scan_fraction``.
     """
-    from nbcalib.preprocess.inputs import CLOUD_SUFFIXES, IMAGE_SUFFIXES
+    from nbcalib.preprocess.sources import CLOUD_SUFFIXES, IMAGE_SUFFIXES
 
     cameras = sorted(p for p in folder.glob("image_0*") if (p / "data").is_dir())
     if not cameras:
@@ -486,7 +486,7 @@ def gather_bag_pairs(
         the same image.
     """
     from nbcalib.io.bag import open_bag
-    from nbcalib.preprocess.inputs import bag_name, bag_topics
+    from nbcalib.preprocess.sources import bag_name, bag_topics
 
     path = Path(path)
     stem = bag_name(path)

@@ -11,9 +11,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from nbcalib.registration.costs import COSTS
-
 __all__ = ["COSTS", "OPTIMIZERS", "RENAMED", "RefineConfig"]
+
+#: The intensity terms by name (:attr:`RefineConfig.cost`), each a module of
+#: :mod:`nbcalib.registration.costs` whose ``terms(view, config)`` returns a list of
+#: ``(term, weight)`` (weights summing to 1 per pair). The settings name them; the costs
+#: package builds them (and imports this table, never the other way).
+COSTS = {
+    "regional": "nbcalib.registration.costs.regional",
+    "nid": "nbcalib.registration.costs.nid",
+}
 
 #: Values of :attr:`RefineConfig.optimizer`.
 OPTIMIZERS = ("hybrid", "lbfgs", "nelder_mead")

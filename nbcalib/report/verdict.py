@@ -16,7 +16,7 @@ import numpy as np
 from nbcalib.report.uncertainty import AXIS_NAMES
 
 if TYPE_CHECKING:
-    from nbcalib.report.quality import Quality
+    from nbcalib.report.assessment import Quality
 
 __all__ = ["ADVICE", "MANY_VIEWS", "advice", "format_bound", "pairs_elsewhere", "reasons"]
 
@@ -43,18 +43,6 @@ def format_bound(value: float, unit: str) -> str:
     if not math.isfinite(value) or abs(value) > limit:
         return f"unbounded (> {limit:g} {unit}: the cost does not fix it)"
     return f"{value:.{digits}f} {unit}"
-
-
-def _finite(value, cap: float = 1e6):
-    """Replace non-finite numbers (JSON cannot hold them) by +-cap, recursively."""
-    if isinstance(value, dict):
-        return {k: _finite(v, cap) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_finite(v, cap) for v in value]
-    if isinstance(value, (float, np.floating)):
-        v = float(value)
-        return v if math.isfinite(v) else math.copysign(cap, v) if not math.isnan(v) else cap
-    return value
 
 
 def _move_allowed(q: Quality) -> tuple[float, float] | None:

@@ -4,7 +4,7 @@ Pieces, each usable alone:
 
 - :mod:`~nbcalib.synthetic.scene`: scenes of analytic primitives (:class:`Scene`), ray cast by
   :mod:`nbcalib.kernels.raycast` over a hierarchy from :mod:`~nbcalib.synthetic.bvh`;
-  :func:`make_scene` generates the procedural rooms and streets of
+  :func:`~nbcalib.synthetic.scenes.make_scene` generates the procedural rooms and streets of
   :mod:`~nbcalib.synthetic.scenes` with :mod:`~nbcalib.synthetic.builder`;
 - :mod:`~nbcalib.synthetic.texture`: materials whose camera albedo and LiDAR reflectivity are
   correlated but not equal (the cross-modal gap);
@@ -54,7 +54,8 @@ __getattr__, __dir__, __all__ = lazy_exports(
             "default_T_camera_lidar",
             "generate_sequence",
         ),
-        "scene": ("Scene", "SceneConfig", "make_scene"),
+        "scene": ("Scene", "SceneConfig"),
+        "scenes": ("make_scene",),
         "texture": ("Material",),
     },
 )

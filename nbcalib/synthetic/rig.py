@@ -47,7 +47,8 @@ from nbcalib.synthetic.lidar import (
 )
 from nbcalib.synthetic.motion import MotionConfig, Trajectory, make_trajectory
 from nbcalib.synthetic.render import RenderConfig, RenderedImage, render_image
-from nbcalib.synthetic.scene import SCENE_KINDS, Scene, SceneConfig, make_scene
+from nbcalib.synthetic.scene import SCENE_KINDS, Scene, SceneConfig
+from nbcalib.synthetic.scenes import make_scene
 from nbcalib.transforms import invert_T, make_T, so3_exp, transform_points
 
 __all__ = [

@@ -4,7 +4,7 @@ A :class:`Scene` holds flat float64 arrays the numba kernels take as they are: t
 (layout in :mod:`nbcalib.kernels.raycast`), the material table (:mod:`nbcalib.synthetic.texture`),
 a bounding volume hierarchy over the primitives (:mod:`nbcalib.synthetic.bvh`), and the lighting.
 Scenes are built with :class:`~nbcalib.synthetic.builder.SceneBuilder`, or generated from a seed
-by :func:`make_scene` (one module per kind in :mod:`nbcalib.synthetic.scenes`):
+by :func:`nbcalib.synthetic.scenes.make_scene` (one module per kind in that package):
 
 - ``"room"``: an office-like room (walls of plaster, bricks or panels, tiled or wooden floor,
   ceiling with light panels; posters, whiteboard, door, windows, an exit sign; tables, cabinets,
@@ -35,7 +35,6 @@ __all__ = [
     "RayHits",
     "Scene",
     "SceneConfig",
-    "make_scene",
 ]
 
 SCENE_KINDS = ("room", "street")
@@ -299,25 +298,3 @@ def _rays(origins, directions):
     if origins.shape != directions.shape:
         raise ValueError(f"origins {origins.shape} do not match directions {directions.shape}")
     return np.ascontiguousarray(origins), directions
-
-
-def make_scene(config: SceneConfig | None = None, **overrides) -> Scene:
-    """Generate a room or a street from a seed.
-
-    Parameters
-    ----------
-    config : SceneConfig, optional
-        Kind, seed, modality gap, texture switches; keyword overrides replace its fields
-        (``make_scene(kind="street", seed=3)``).
-
-    Returns
-    -------
-    Scene
-    """
-    config = SceneConfig(**{**(config.__dict__ if config else {}), **overrides})
-    rng = np.random.default_rng([config.seed, 0x5CE7E])
-    # the generators build with SceneBuilder, which makes this module's Scene: imported here
-    from nbcalib.synthetic.scenes import room, street
-
-    make = room.make_room if config.kind == "room" else street.make_street
-    return make(config, rng)

@@ -5,7 +5,8 @@ For each pair the cost looks at the points the camera sees from the pose it is b
 (:class:`PairView`), and sums weighted **terms** over the pairs:
 
 - the **intensity term**, chosen by :attr:`RefineConfig.cost
-  <nbcalib.registration.config.RefineConfig>` (a name of :data:`COSTS`, each one module here):
+  <nbcalib.registration.config.RefineConfig>` (a name of
+  :data:`~nbcalib.registration.config.COSTS`, each one module here):
 
   - ``"regional"`` (:mod:`~nbcalib.registration.costs.regional`): the image is cut into
     regions of about ``region_points`` points each at the anchor, one joint histogram per
@@ -21,9 +22,9 @@ Every term is an object with ``evaluate(T, grad=False)`` returning a
 ``len()`` (its points) and a settable ``parallel``; :func:`build_cost` returns their weighted
 sum, a :class:`~nbcalib.registration.nid.MultiNIDCost`, and the number of visible points of
 each pair. Fine registration (:mod:`nbcalib.registration.refine`), the quality report
-(:mod:`nbcalib.report.quality`), the warm-up (:mod:`nbcalib.warmup`) and the records in
+(:mod:`nbcalib.report.quality`), the warm-up (:mod:`nbcalib.warmup_job`) and the records in
 ``calib.json`` all go through :func:`build_cost`, so a new cost is a module here, a name in
-:data:`COSTS` and its setting, and nothing else changes.
+:data:`~nbcalib.registration.config.COSTS` and its setting, and nothing else changes.
 """
 
 from __future__ import annotations
@@ -36,21 +37,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from nbcalib._threads import thread_map
+from nbcalib.registration.config import COSTS, RefineConfig
 
-if TYPE_CHECKING:  # this module is imported by the settings, which must not load numba
+if TYPE_CHECKING:  # the kernels load with the first cost built, not with this module
     from nbcalib.camera import CameraModel
-    from nbcalib.registration.config import RefineConfig
     from nbcalib.registration.nid import MultiNIDCost
 
 __all__ = ["COSTS", "PairView", "RigTerm", "build_cost", "pair_view", "point_budget"]
-
-#: The intensity terms by name (:attr:`RefineConfig.cost
-#: <nbcalib.registration.config.RefineConfig>`), each a module of this package whose
-#: ``terms(view, config)`` returns a list of ``(term, weight)`` (weights summing to 1 per pair).
-COSTS = {
-    "regional": "nbcalib.registration.costs.regional",
-    "nid": "nbcalib.registration.costs.nid",
-}
 
 
 @dataclass
@@ -126,7 +119,7 @@ def pair_view(
 
     ``n_pairs``: how many pairs the job has (:func:`point_budget`).
     """
-    from nbcalib.registration.refine import downscale_camera, downscale_image, visible_subset
+    from nbcalib.registration.pair import downscale_camera, downscale_image, visible_subset
 
     full = pair.camera
     budget = point_budget(full, config, n_pairs)

@@ -3,7 +3,7 @@
 Added to each pair's intensity term with the weight ``structure_weight`` (0, off, by default;
 :mod:`nbcalib.registration.costs`). The depth-edge score of each point and the image's edge
 strength come from :mod:`nbcalib.registration.structure`, made once per pair
-(:meth:`~nbcalib.registration.refine.RegistrationPair.structure`).
+(:meth:`~nbcalib.registration.pair.RegistrationPair.structure`).
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ __all__ = ["terms"]
 
 def terms(view, config) -> list:
     """``[(NIDCost, 1.0)]``: the pair's depth-edge scores against its image's edges."""
-    from nbcalib.registration.refine import downscale_image
+    from nbcalib.registration.pair import downscale_image
 
     scores, edges = view.pair.structure()
     cost = NIDCost(
