@@ -19,7 +19,9 @@ import traceback
 
 from nbcalib import __version__
 from nbcalib.commands._args import add_verbosity_arguments
+from nbcalib.commands._options import flag_spelling
 from nbcalib.errors import FAILED_STATUS, InputError, RegistrationFailed
+from nbcalib.wording import say, spelling
 
 #: Command modules in the order ``--help`` lists them (the order of the method's stages).
 COMMAND_MODULES = (
@@ -131,6 +133,13 @@ def _parse(parser: argparse.ArgumentParser, argv: list[str]) -> argparse.Namespa
     return args
 
 
+class _SpellingFormatter(logging.Formatter):
+    """Log lines with settings named by their flags (:mod:`nbcalib.wording`)."""
+
+    def format(self, record: logging.LogRecord) -> str:
+        return say(super().format(record))
+
+
 def _log_to_stderr(level: int) -> None:
     """Stage progress (the ``nbcalib`` loggers) to this command's stderr, one line each."""
     logger = logging.getLogger("nbcalib")
@@ -139,7 +148,7 @@ def _log_to_stderr(level: int) -> None:
             logger.removeHandler(handler)
     handler = logging.StreamHandler(sys.stderr)
     handler.nbcalib_cli = True
-    handler.setFormatter(logging.Formatter("%(message)s"))
+    handler.setFormatter(_SpellingFormatter("%(message)s"))
     logger.addHandler(handler)
     logger.setLevel(level)
 
@@ -154,7 +163,8 @@ def main(argv: list[str] | None = None) -> int:
     level = logging.DEBUG if args.verbose else logging.WARNING if args.quiet else logging.INFO
     _log_to_stderr(level)
     try:
-        status = args.run(args)
+        with spelling(flag_spelling()):  # messages name settings by their flags
+            status = args.run(args)
     except InputError as exc:
         print(f"nbcalib {args.command}: error: {exc}", file=sys.stderr)
         return 2

@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import os
 
+from nbcalib.wording import say
+
 
 class InputError(ValueError):
     """Bad user input: one line naming the file or option and the problem.
@@ -25,7 +27,8 @@ class InputError(ValueError):
 
     def __init__(self, message: str, path: str | os.PathLike | None = None):
         self.path = None if path is None else os.fspath(path)
-        text = " ".join(str(message).split())  # one line, whatever the caller passed
+        # one line, whatever the caller passed; settings named as the front end spells them
+        text = say(" ".join(str(message).split()))
         super().__init__(f"{self.path}: {text}" if self.path else text)
 
 
@@ -46,7 +49,7 @@ class RegistrationFailed(RuntimeError):
 
     def __init__(self, message: str, result=None):
         self.result = result
-        super().__init__(" ".join(str(message).split()))
+        super().__init__(say(" ".join(str(message).split())))
 
 
 #: Exit status of a command whose run finished without a trustworthy result (a fine

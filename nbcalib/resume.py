@@ -149,7 +149,7 @@ def plan_stages(
         ):
             raise InputError(
                 f"holds a finished result (T_lidar_camera), which {only} would replace; use "
-                "--force to recompute it",
+                "run.force to recompute it",
                 work.calib_path,
             )
         return [(only, True, "")]
@@ -158,13 +158,13 @@ def plan_stages(
     rerun = False
     for k, stage in enumerate(STAGES):
         if until is not None and k > STAGES.index(until):
-            plan.append((stage, False, f"--until {until}"))
+            plan.append((stage, False, f"run.until {until}"))
             continue
         if stage in skip:
             plan.append((stage, False, skip[stage]))
             continue
         if stage == redo_from:
-            rerun, reason = True, f"--from {stage}"
+            rerun, reason = True, f"run.from {stage}"
         elif rerun:
             reason = "an earlier stage ran"
         else:
@@ -176,7 +176,7 @@ def plan_stages(
         if first is not None:
             raise InputError(
                 f"holds a finished result (T_lidar_camera) and {first[0]} would run again "
-                f"({first[1]}); use --force to recompute it, or --from STAGE",
+                f"({first[1]}); use run.force to recompute it, or run.from STAGE",
                 work.calib_path,
             )
     return plan

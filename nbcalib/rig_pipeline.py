@@ -110,7 +110,7 @@ def find_cameras(
     bags, _, _ = classify_inputs(spec.inputs)
     if not bags:
         if topics:
-            raise InputError("--camera-topics takes image topics of bags; give a bag")
+            raise InputError("run.camera_topics takes image topics of bags; give a bag")
         return None
     if topics is None and config.image_topic is not None:
         return None
@@ -130,13 +130,15 @@ def find_cameras(
         return None
     if spec.per_image:
         raise InputError(
-            "several cameras take one pair per bag for now: leave out --every, --pair-count "
-            "and --image-times (or calibrate one camera with --image-topic)"
+            "several cameras take one pair per bag for now: leave out inputs.every, "
+            "inputs.pair_count "
+            "and inputs.image_times (or calibrate one camera with preprocess.image_topic)"
         )
     if spec.camera or spec.camera_model:
         raise InputError(
-            "--camera/--camera-model give one camera: with several cameras each camera's comes "
-            "from its camera info topic (or from --rig)"
+            "inputs.camera/inputs.camera_model give one camera: with several cameras each "
+            "camera's comes "
+            "from its camera info topic (or from run.rig)"
         )
     cameras = []
     for topic in topics:
@@ -168,7 +170,7 @@ class _Recording:
         camera = self._camera.get(name)
         if camera is None:
             raise InputError(
-                f"camera {name}: no camera info topic found; give the cameras with --rig FILE "
+                f"camera {name}: no camera info topic found; give the cameras with run.rig FILE "
                 "(a Kalibr camchain or an nbcalib rig file)"
             )
         return self._pairs[name], camera, self._data_path
@@ -324,13 +326,13 @@ class RigCalibrator:
         t0 = time.perf_counter()
         cameras = list(cameras)
         if (init is not None or no_matching) and self.rig is None:
-            raise InputError("a start (--init) for several cameras needs their rig (--rig)")
+            raise InputError("a start (run.init) for several cameras needs their rig (run.rig)")
         if no_matching and init is None:
-            raise InputError("--no-matching needs --init: the rig's start")
+            raise InputError("run.no_matching needs run.init: the rig's start")
         self._init = init
         self._check_rig(cameras)
         if no_matching:
-            reason = "--no-matching: the rig starts from --init"
+            reason = "run.no_matching: the rig starts from run.init"
             skip = {"find-matches": reason, "initial-guess": reason, **(skip or {})}
         if self.workdir is not None:
             check_writable(self.workdir)
@@ -458,7 +460,7 @@ class RigCalibrator:
         else:
             raise InputError(
                 "no camera has an initial guess: the rig has no start (give the first camera's "
-                "rough T_lidar_camera with --init)"
+                "rough T_lidar_camera with run.init)"
             )
         reference = self.calibrators[ref]
         extra = []
@@ -520,14 +522,14 @@ class RigCalibrator:
             if dr > RIG_START_TOLERANCE_DEG:
                 far.append(f"{name} {dr:.1f} deg")
                 log.warning(
-                    "%s's own guess puts the rig %.1f deg from %s's through --rig: the rig file "
+                    "%s's own guess puts the rig %.1f deg from %s's through run.rig: the rig file "
                     "may not fit these cameras (other cameras, another order?)", name, dr, chosen,
                 )  # fmt: skip
         if far and len(far) == len(starts) - 1:
             raise InputError(
-                f"the rig does not fit the cameras: through it every other camera's own guess "
+                "the rig does not fit the cameras: through it every other camera's own guess "
                 f"puts the rig far from {chosen}'s ({', '.join(far)}); check the rig file's "
-                "cameras and their order, or calibrate without --rig to see the transforms the "
+                "cameras and their order, or calibrate without run.rig to see the transforms the "
                 "data imply"
             )
 

@@ -162,3 +162,88 @@ def test_no_module_over_700_lines():
         if (n := len(p.read_text().splitlines())) > MAX_LINES
     }
     assert not long, f"modules over {MAX_LINES} lines (split along a seam): {long}"
+
+
+# ---------------------------------------------------------------------------------------------
+# Messages below the command line name settings as the API does (nbcalib.wording)
+
+#: Strings below the command line that may hold a flag: whole commands to type in a shell, the
+#: same for every user (there is no setting to name), each with why.
+FLAG_ALLOWED = {
+    ("matching/onnx_matcher.py", "--models"): "the shell command that exports a model",
+    ("matching/onnx_matcher.py", "--help"): "the shell command that says how to export one",
+    ("config.py", "--config"): "the header of a settings file: the command that reads it",
+    ("io/camera_file.py", "--camera"): "the header of a camera file: the command that reads it",
+}
+
+
+def _messages(path: Path):
+    """(line, text) of the string constants of a module, docstrings left out."""
+    tree = ast.parse(path.read_text())
+    docs = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.Module, ast.ClassDef, ast.FunctionDef, ast.AsyncFunctionDef)):
+            first = node.body[0] if node.body else None
+            if isinstance(first, ast.Expr) and isinstance(first.value, ast.Constant):
+                docs.add(id(first.value))
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Constant) and isinstance(node.value, str) and id(node) not in docs:
+            yield node.lineno, node.value
+
+
+def _below_the_command_line():
+    for path in sorted(PACKAGE.rglob("*.py")):
+        rel = path.relative_to(PACKAGE).as_posix()
+        if not (rel.startswith("commands/") or rel == "cli.py"):
+            yield rel, path
+
+
+@functools.cache
+def _cli_flags() -> frozenset[str]:
+    import argparse
+
+    from nbcalib.cli import build_parser
+
+    flags, parsers = set(), [build_parser()]
+    while parsers:
+        parser = parsers.pop()
+        for action in parser._actions:
+            flags.update(s for s in action.option_strings if s.startswith("--"))
+            if isinstance(action, argparse._SubParsersAction):
+                parsers.extend(action.choices.values())
+    return frozenset(flags)
+
+
+def test_no_cli_flag_in_a_message_below_the_command_line():
+    import re
+
+    flags = _cli_flags()
+    assert {"--every", "--frames", "--max-outer", "--init"} <= flags  # the walk found them
+    pattern = re.compile(r"(?<![\w-])--[a-z][a-z0-9-]*")
+    found = [
+        f"nbcalib/{rel}:{line}: {flag} in {text[:70]!r}"
+        for rel, path in _below_the_command_line()
+        for line, text in _messages(path)
+        for flag in pattern.findall(text)
+        if flag in flags and (rel, flag) not in FLAG_ALLOWED
+    ]
+    assert not found, "name the setting (nbcalib.wording), not the flag:\n" + "\n".join(found)
+
+
+def test_every_setting_a_message_names_has_a_flag():
+    """Each API name in a message below the command line is one the command line spells: a
+    misspelt name would reach the command line's user as it is."""
+    from nbcalib.commands._options import flag_names
+    from nbcalib.config import SECTIONS
+    from nbcalib.wording import API_NAME
+
+    known = flag_names()
+    rooms = {*SECTIONS, "inputs", "run"}
+    found = [
+        f"nbcalib/{rel}:{line}: {m.group(1)}.{m.group(2)}"
+        for rel, path in _below_the_command_line()
+        for line, text in _messages(path)
+        for m in API_NAME.finditer(text)
+        if m.group(1) in rooms and f"{m.group(1)}.{m.group(2)}" not in known
+    ]
+    assert not found, "names without a flag:\n" + "\n".join(found)

@@ -304,7 +304,7 @@ def test_stage_selection_and_missing_results(tmp_path, rng):
     workdir = _workdir(tmp_path, example_camera("pinhole"), {"init_T_lidar_camera_auto": T_auto})
     calib, key = load_result(workdir)
     assert key == "init_T_lidar_camera_auto" and calib.path == workdir / "calib.json"
-    for stage, hint in (("final", "nbcalib calibrate"), ("init", "--manual")):
+    for stage, hint in (("final", "nbcalib calibrate"), ("init", r"run\.manual")):
         with pytest.raises(InputError, match=hint):
             load_result(workdir, stage=stage)
     with pytest.raises(InputError, match="work directory not found"):

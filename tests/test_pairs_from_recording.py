@@ -288,9 +288,12 @@ def test_several_images_one_pair_each(sequence_files, tmp_path):
 @pytest.mark.parametrize(
     "extra, message",
     [
-        ({"image_times": "1,2"}, "--image-times gives 2 times for 3 images"),
-        ({"scan_times": "1,2", "image_times": "1,2,3"}, "--scan-times gives 2 times for 4 scans"),
-        ({"pair_count": 5}, "--pair-count 5 asks more pairs than the 3 images"),
+        ({"image_times": "1,2"}, r"inputs\.image_times gives 2 times for 3 images"),
+        (
+            {"scan_times": "1,2", "image_times": "1,2,3"},
+            r"inputs\.scan_times gives 2 times for 4 scans",
+        ),
+        ({"pair_count": 5}, r"inputs\.pair_count 5 asks more pairs than the 3 images"),
     ],
 )
 def test_image_sequence_errors(sequence_files, extra, message):
@@ -393,7 +396,7 @@ def test_a_bag_without_selection_is_one_pair_of_all_its_scans(bag):
     pairs, _, _ = InputSpec(inputs=(str(bag),)).gather(PreprocessConfig())
     assert [p.name for p in pairs] == ["drive.bag"] and len(pairs[0].scans) == N_SCANS
     assert pairs[0].image_scan is None  # the cloud stays in the first scan's frame
-    with pytest.raises(InputError, match="a bag without --every"):
+    with pytest.raises(InputError, match=r"a bag without inputs\.every"):
         InputSpec(inputs=(str(bag),)).gather(PreprocessConfig(neighbors=2))
 
 

@@ -81,7 +81,7 @@ def test_far_initial_guess_is_suspect(pair):
     assert any("far apart" in r for r in q.reasons), q.reasons
     assert q.init_change[0] == pytest.approx(np.linalg.norm([0.3, 0.0, 0.1]), rel=0.1)
     # what to do: start from a measured pose or picked points, said once for its reasons
-    assert any("--manual picks.json" in step for step in q.next_steps), q.next_steps
+    assert any("run.manual=picks.json" in step for step in q.next_steps), q.next_steps
     assert len(q.next_steps) == len(set(q.next_steps)) <= len(q.reasons)
 
 
@@ -799,7 +799,7 @@ def test_restarts_that_end_elsewhere_widen_the_interval_and_make_it_suspect(qual
     np.testing.assert_allclose(q.sigma**2 - base.sigma**2, added, rtol=1e-9, atol=1e-15)
     assert q.verdict == "suspect"
     assert any("depends on where registration starts" in r for r in q.reasons), q.reasons
-    assert any("--init" in s for s in q.next_steps)
+    assert any("run.init=" in s for s in q.next_steps)
     # a median end within the limit is no reason; restarts=0 judges as if there were none
     near = replace(quality_at_truth, restart_offsets=ends * 0.1)
     assert not any("registration starts" in r for r in rejudge(near, c).reasons)

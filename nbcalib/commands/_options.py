@@ -36,6 +36,8 @@ __all__ = [
     "add_options",
     "build_config",
     "file_settings",
+    "flag_names",
+    "flag_spelling",
     "given_settings",
 ]
 
@@ -465,15 +467,49 @@ def build_config(
     InputError
         A setting out of range (the message names the option or the file).
     """
+    from nbcalib.wording import spelling
+
     config = base or CalibrationConfig()
     if file_values:
         try:
             config = set_values(config, file_values)
         except ValueError as exc:
-            raise InputError(str(exc), file_path) from None
+            with spelling(None):  # the file's own names for its settings (``refine.bins``)
+                raise InputError(str(exc), file_path) from None
     given = given_settings(args)
     try:
         return set_values(config, given)
     except ValueError as exc:
         flags = [o.flag for o in SETTING_OPTIONS.values() if o.setting in given]
-        raise InputError(f"{exc} (options: {' '.join(sorted(set(flags)))})") from None
+        with spelling(None):  # the setting's name, then the options that set it
+            raise InputError(f"{exc} (options: {' '.join(sorted(set(flags)))})") from None
+
+
+#: Inputs the command line takes by argparse alone (not in an Option table).
+_OTHER_INPUT_FLAGS = {"inputs.points": "--points", "inputs.image": "--image"}
+
+
+def flag_names() -> dict[str, str]:
+    """The API name of everything the command line sets -> its flag (:mod:`nbcalib.wording`).
+
+    Settings ``section.field`` (and ``seed``) from the stages' Option tables, inputs
+    ``inputs.field`` from the input tables, and ``run.name`` from :data:`RUN_OPTIONS`: one
+    table, so that a message below the command line names a setting as the API does and the
+    command line's user reads the flag.
+    """
+    names = dict(_OTHER_INPUT_FLAGS)
+    for option in (*PREPROCESS, *MATCHING, *INITIAL_GUESS, *REFINE, *ASSESS):
+        if "." in option.setting and option.takes_value:  # a switch sets one value, not any
+            names.setdefault(option.setting, option.flag)
+    for option in (*INPUT_OPTIONS, *RECORDING_OPTIONS):
+        names[f"inputs.{option.dest}"] = option.flag
+    for option in RUN_OPTIONS:
+        names[f"run.{option.dest}"] = option.flag
+    return names
+
+
+def flag_spelling():
+    """The command line's spelling of messages: API names as flags (:func:`flag_names`)."""
+    from nbcalib.wording import translator
+
+    return translator(flag_names())

@@ -409,7 +409,9 @@ def load_result(workdir: str | os.PathLike, *, stage: str = "latest") -> tuple[C
     if key is None or not calib.has_result(key):
         hint = {
             "T_lidar_camera": "run 'nbcalib calibrate' first",
-            "init_T_lidar_camera": "run 'nbcalib initial-guess --manual ...' first",
+            "init_T_lidar_camera": (
+                "run 'nbcalib initial-guess' with picked points (run.manual) first"
+            ),
             "init_T_lidar_camera_auto": "run 'nbcalib initial-guess' first",
             None: "run 'nbcalib initial-guess' or 'nbcalib calibrate' first",
         }[key]

@@ -293,7 +293,7 @@ def find_correspondences(
         elif scale is None:
             log.warning(
                 "%s: the camera of the stored LiDAR image is unknown: matching it with the "
-                "camera image at its own scale (--camera-scale sets one)",
+                "camera image at its own scale (matching.camera_scale sets one)",
                 pair.name,
             )
         m = match_images(

@@ -22,6 +22,7 @@ from nbcalib.pipeline.guess import GuessSteps
 from nbcalib.pipeline.records import JobRecords, _detail, _uncertainty_record
 from nbcalib.products import CalibrationResult, Start, as_stored_values
 from nbcalib.resume import plan_stages
+from nbcalib.wording import say
 from nbcalib.workdir import WorkDir
 
 __all__ = ["Calibrator", "make_report"]
@@ -137,7 +138,7 @@ class Calibrator(GuessSteps, JobRecords):
             skip.setdefault("find-matches", f"starting from {given.source}")
             skip.setdefault("initial-guess", f"starting from {given.source}")
         elif manual is not None:
-            skip.setdefault("find-matches", "--manual")
+            skip.setdefault("find-matches", "run.manual")
         if self.work is not None:
             self.work.check_writable()
         plan = plan_stages(
@@ -147,7 +148,7 @@ class Calibrator(GuessSteps, JobRecords):
             header = f"[{k + 1}/{len(plan)}] {stage}"
             if not runs:
                 # a stage this job already ran, or one the caller stopped before, needs no line
-                said = stage in self.ran or reason.startswith("--until")
+                said = stage in self.ran or reason.startswith("run.until")
                 log.log(logging.DEBUG if said else logging.INFO, "%s: skipped (%s)", header, reason)
                 self.skipped.append(stage)
                 continue
@@ -195,7 +196,8 @@ class Calibrator(GuessSteps, JobRecords):
         if self._inputs is None or getattr(self._inputs, "empty", False):
             where = self.work.path if self.work is not None else None
             raise InputError(
-                "nothing to preprocess: give INPUT... WORKDIR (or --points FILE --image FILE)",
+                "nothing to preprocess: give INPUT... WORKDIR (or inputs.points FILE "
+                "inputs.image FILE)",
                 where,
             )
         pair_inputs, camera, data_path = self._inputs.gather(self.config.preprocess)
@@ -363,13 +365,13 @@ class Calibrator(GuessSteps, JobRecords):
         from nbcalib.errors import RegistrationFailed
 
         dt, dr = result.moved
-        message = (
+        message = say(  # kept in calib.json: spelt for the front end, as the error is
             f"fine registration ran to the edge of its trust region ({100 * dt:.1f} cm / "
             f"{dr:.2f} deg from the start; the region is {100 * result.trust_translation:g} cm / "
             f"{result.trust_rotation_deg:g} deg): its optimum lies beyond, so it has no result. "
             f"The start ({start.source}) is too far off, or the data hold no minimum near it: "
-            "start closer (--init, or manual picks: initial-guess --manual) or widen the region "
-            "(--trust-translation, --trust-rotation)"
+            "start closer (run.init, or manual picks: initial-guess run.manual) or widen the "
+            "region (refine.trust_translation, refine.trust_rotation_deg)"
         )
         self.refinement = None
         if calib is not None:

@@ -135,7 +135,7 @@ class GuessSteps:
                 "add more picks"
                 if manual
                 else "check the matches (nbcalib find-matches) or pick correspondences by hand "
-                "with --manual"
+                "with run.manual"
             )
             raise InputError(
                 f"too few correspondences: {len(corr)} (need at least {MIN_CORRESPONDENCES}); "
@@ -163,14 +163,15 @@ class GuessSteps:
         if not guess.found and not self._accept_failed_guess:
             if manual:
                 raise InputError(
-                    f"initial guess not written: {guess.failure} (--force writes it anyway)", where
+                    f"initial guess not written: {guess.failure} (run.force writes it anyway)",
+                    where,
                 )
             raise InputError(
                 f"initial guess not written: {guess.failure}; the {source} found no pose the "
                 "camera and the LiDAR agree on (see *_matches.png). Next: a rough extrinsic "
-                "with --init X,Y,Z,QX,QY,QZ,QW [--init-uncertainty M DEG], hand-picked "
-                "correspondences with --manual FILE, or a rough orientation for matching with "
-                "--prior X,Y,Z,QX,QY,QZ,QW",
+                "with run.init X,Y,Z,QX,QY,QZ,QW [run.init_uncertainty M DEG], hand-picked "
+                "correspondences with run.manual FILE, or a rough orientation for matching with "
+                "run.prior X,Y,Z,QX,QY,QZ,QW",
                 where,
             )
         log.info(

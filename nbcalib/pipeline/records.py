@@ -77,7 +77,7 @@ class JobRecords:
         if not required:
             return None
         raise InputError(
-            "no initial guess in calib.json: run nbcalib initial-guess first, or pass --init",
+            "no initial guess in calib.json: run nbcalib initial-guess first, or pass run.init",
             None if self.work is None else self.work.calib_path,
         )
 

@@ -73,16 +73,17 @@ def _check_all_scans(config: PreprocessConfig, what: str) -> None:
     if config.neighbors != 1:
         raise InputError(
             f"neighbors={config.neighbors}: {what} makes one pair of all its scans (at most "
-            "--max-scans); scans around an image are for pairs per image (--frames, --images, "
-            "or a bag's --every/--pair-count/--image-times)"
+            "preprocess.max_scans); scans around an image are for pairs per image "
+            "(inputs.frames, inputs.images, or a bag's "
+            "inputs.every/inputs.pair_count/inputs.image_times)"
         )
 
 
 #: The camera option a camera parameter error is about, by a word of its message.
 _CAMERA_OPTION_WORDS = (
-    ("--distortion", "distortion"),
-    ("--intrinsics", "intrinsics"),
-    ("--camera-model", "model"),
+    ("inputs.distortion", "distortion"),
+    ("inputs.intrinsics", "intrinsics"),
+    ("inputs.camera_model", "model"),
 )
 
 
@@ -141,7 +142,7 @@ class InputSpec:
             value = getattr(self, name)
             if value is not None:
                 object.__setattr__(self, name, str(value))
-        for name, flag in (("every", "--every"), ("pair_count", "--pair-count")):
+        for name, flag in (("every", "inputs.every"), ("pair_count", "inputs.pair_count")):
             value = getattr(self, name)
             if value is None:
                 continue
@@ -153,7 +154,7 @@ class InputSpec:
                 raise InputError(f"{flag} must be a whole number >= 1, got {value!r}")
             object.__setattr__(self, name, number)
         if self.every is not None and self.pair_count is not None:
-            raise InputError("give --every or --pair-count, not both")
+            raise InputError("give inputs.every or inputs.pair_count, not both")
 
     @property
     def empty(self) -> bool:
@@ -227,7 +228,9 @@ class InputSpec:
         if self.per_image:
             pairs, data_path = self._gather_per_image(bags, clouds, images, config)
         elif bags:
-            _check_all_scans(config, "a bag without --every, --pair-count or --image-times")
+            _check_all_scans(
+                config, "a bag without inputs.every, inputs.pair_count or inputs.image_times"
+            )
             bags = sorted(bags, key=lambda p: p.name)  # read on every core (nbcalib._threads)
             pairs = thread_map(lambda bag: gather_bag(bag, config), bags)
             data_path = str(Path(bags[0]).resolve().parent)
@@ -235,8 +238,8 @@ class InputSpec:
             if len(images) != 1:
                 raise InputError(
                     f"plain files need exactly one image (.png/.jpg), got {len(images)}"
-                    + ("; for one pair per image give them with --images" if images else "")
-                    + ("" if images else "; add --image FILE")
+                    + ("; for one pair per image give them with inputs.images" if images else "")
+                    + ("" if images else "; add inputs.image FILE")
                 )
             _check_all_scans(config, "plain files with one image")
             pairs = [gather_files(clouds, images[0], config)]
@@ -251,8 +254,8 @@ class InputSpec:
             raise InputError(f"{Path(source).name} does not fit the camera: {exc}") from None
         if camera is None:
             raise InputError(
-                f"{pairs[0].name}: no camera info found; give the camera with --camera FILE or "
-                "--camera-model/--intrinsics/--distortion"
+                f"{pairs[0].name}: no camera info found; give the camera with inputs.camera "
+                "FILE or inputs.camera_model/inputs.intrinsics/inputs.distortion"
             )
         return pairs, camera, data_path
 
@@ -263,16 +266,22 @@ class InputSpec:
         select = {"every": self.every, "pair_count": self.pair_count}
         if self.frames:
             if bags or clouds or images or self.images:
-                raise InputError("--frames takes the whole recording: give no other input")
+                raise InputError("inputs.frames takes the whole recording: give no other input")
             if self.image_times is not None or self.scan_times is not None:
-                raise InputError("--image-times/--scan-times do not apply to --frames")
+                raise InputError(
+                    "inputs.image_times/inputs.scan_times do not apply to inputs.frames"
+                )
             pairs = recording.gather_frames(self.frames, config, **select)
             return pairs, str(Path(self.frames).resolve())
         if bags:
             if self.images or self.scan_times is not None:
-                raise InputError("--images/--scan-times are for plain point cloud files, not bags")
+                raise InputError(
+                    "inputs.images/inputs.scan_times are for plain point cloud files, not bags"
+                )
             if self.image_times is not None and (self.every or self.pair_count):
-                raise InputError("give --image-times, --every or --pair-count, not several")
+                raise InputError(
+                    "give inputs.image_times, inputs.every or inputs.pair_count, not several"
+                )
             pairs = []
             for bag in sorted(bags, key=lambda p: p.name):
                 pairs += recording.gather_bag_pairs(
@@ -281,14 +290,17 @@ class InputSpec:
             return pairs, str(Path(bags[0]).resolve().parent)
         if not self.images:
             raise InputError(
-                "--every, --pair-count, --image-times and --scan-times are for several "
-                "images: give --frames DIR, --images FILE..., or a bag"
+                "inputs.every, inputs.pair_count, inputs.image_times and inputs.scan_times are "
+                "for several images: give inputs.frames DIR, inputs.images FILE..., or a bag"
             )
         if images:
-            raise InputError("give the images of a sequence all with --images (none as INPUT)")
+            raise InputError("give the images of a sequence all with inputs.images (none as INPUT)")
         for path in self.images:
             if Path(path).suffix.lower() not in IMAGE_SUFFIXES:
-                raise InputError(f"--images takes images ({', '.join(IMAGE_SUFFIXES)})", path=path)
+                raise InputError(
+                    f"inputs.images takes images ({', '.join(IMAGE_SUFFIXES)})",
+                    path=path,
+                )
         pairs = recording.gather_image_sequence(
             clouds,
             self.images,
@@ -309,14 +321,14 @@ class InputSpec:
             return load_camera(self.camera, width=width, height=height)
         if not self.camera_model:
             if self.intrinsics or self.distortion:
-                raise InputError("--intrinsics/--distortion need --camera-model")
+                raise InputError("inputs.intrinsics/inputs.distortion need inputs.camera_model")
             return None
         try:
             model = canonical_model_name(self.camera_model)
-            intrinsics = _numbers(self.intrinsics, "--intrinsics")
+            intrinsics = _numbers(self.intrinsics, "inputs.intrinsics")
             if model == "equirectangular" and not intrinsics:
                 intrinsics = [width, height]  # as the reference: the image size
-            distortion = _numbers(self.distortion, "--distortion")
+            distortion = _numbers(self.distortion, "inputs.distortion")
             return create_camera(model, intrinsics, distortion, width, height)
         except ValueError as exc:
             text = str(exc)
@@ -324,6 +336,6 @@ class InputSpec:
                 raise InputError(text) from None
             option = next(
                 (f for f, word in _CAMERA_OPTION_WORDS if word in text),
-                "--camera-model/--intrinsics/--distortion",
+                "inputs.camera_model/inputs.intrinsics/inputs.distortion",
             )
             raise InputError(f"{option}: {text}") from None

@@ -93,7 +93,9 @@ def select_images(count: int, *, every: int | None = None, pair_count: int | Non
         return list(range(0, count, every))
     if pair_count is not None:
         if pair_count > count:
-            raise InputError(f"--pair-count {pair_count} asks more pairs than the {count} images")
+            raise InputError(
+                f"inputs.pair_count {pair_count} asks more pairs than the {count} images"
+            )
         if pair_count == 1:
             return [0]
         step = (count - 1) / (pair_count - 1)
@@ -329,7 +331,7 @@ def gather_frames(folder, config: PreprocessConfig, *, every=None, pair_count=No
 
     folder = Path(folder)
     if not folder.is_dir():
-        raise InputError("no such folder (--frames: a folder of frame folders)", folder)
+        raise InputError("no such folder (inputs.frames: a folder of frame folders)", folder)
     if (folder / KITTI_SCANS).is_dir():
         names, scans, images, fractions = _kitti_raw_frames(folder, config)
     else:
@@ -434,7 +436,9 @@ def gather_image_sequence(
     """
     scan_paths, image_paths = [Path(p) for p in cloud_paths], [Path(p) for p in image_paths]
     if not scan_paths:
-        raise InputError("--images needs the point clouds (INPUT... or --points), in time order")
+        raise InputError(
+            "inputs.images needs the point clouds (INPUT... or inputs.points), in time order"
+        )
     stems = [p.stem for p in image_paths]
     if len(set(stems)) != len(stems):
         twice = sorted({s for s in stems if stems.count(s) > 1})
@@ -442,23 +446,23 @@ def gather_image_sequence(
     n_scans = len(scan_paths)
     begins = None
     if scan_times is not None:
-        begins = parse_times(scan_times, "--scan-times")
+        begins = parse_times(scan_times, "inputs.scan_times")
         if begins.size != n_scans:
-            raise InputError(f"--scan-times gives {begins.size} times for {n_scans} scans")
+            raise InputError(f"inputs.scan_times gives {begins.size} times for {n_scans} scans")
         if np.any(np.diff(begins) <= 0):
-            raise InputError("--scan-times must increase (the scans in time order)")
+            raise InputError("inputs.scan_times must increase (the scans in time order)")
     if image_times is None:
         if len(image_paths) > n_scans:
             raise InputError(
                 f"{len(image_paths)} images but {n_scans} scans: image i goes with scan i; "
-                "give --image-times (and --scan-times) to place them"
+                "give inputs.image_times (and inputs.scan_times) to place them"
             )
         shots = [_Shot(k, stems[k], k, config.image_scan_fraction) for k in range(len(stems))]
     else:
-        times = parse_times(image_times, "--image-times")
+        times = parse_times(image_times, "inputs.image_times")
         if times.size != len(image_paths):
             raise InputError(
-                f"--image-times gives {times.size} times for {len(image_paths)} images"
+                f"inputs.image_times gives {times.size} times for {len(image_paths)} images"
             )
         if begins is None:
             begins = np.arange(n_scans) / config.frame_rate
@@ -505,7 +509,9 @@ def gather_bag_pairs(
         begins = (scan_stamps - zero) / 1e9
         seconds = (image_stamps - zero) / 1e9
         if image_times is not None:
-            chosen = _nearest_images(parse_times(image_times, "--image-times"), image_stamps, path)
+            chosen = _nearest_images(
+                parse_times(image_times, "inputs.image_times"), image_stamps, path
+            )
         else:
             last = begins[-1] + 1.0 / config.frame_rate
             inside = np.flatnonzero((seconds >= begins[0]) & (seconds <= last)).tolist()
@@ -562,11 +568,14 @@ def _nearest_images(times: np.ndarray, stamps: np.ndarray, path) -> list[int]:
         if abs(seconds[k] - t) > period:
             raise InputError(
                 f"no image within {period:.3f} s of {t:.6f} (the images span "
-                f"{seconds[0]:.6f} .. {seconds[-1]:.6f}; --image-times are header stamps in "
+                f"{seconds[0]:.6f} .. {seconds[-1]:.6f}; inputs.image_times are header stamps in "
                 "seconds)",
                 path,
             )
         if k in chosen:
-            raise InputError(f"--image-times {chosen[k]:.6f} and {t:.6f} pick the same image", path)
+            raise InputError(
+                f"inputs.image_times {chosen[k]:.6f} and {t:.6f} pick the same image",
+                path,
+            )
         chosen[k] = float(t)
     return sorted(chosen)

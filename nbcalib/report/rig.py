@@ -84,7 +84,7 @@ def _rig_section(job: dict) -> str:
     ref = html.escape(str(job.get("reference", "")))
     joint = bool(job.get("joint"))
     how = (
-        "given (--rig): one rig pose refined from every camera's pairs, each camera's result "
+        "given (run.rig): one rig pose refined from every camera's pairs, each camera's result "
         "that pose through the rig"
         if joint
         else "as the cameras' own results imply"

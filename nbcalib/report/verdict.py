@@ -14,6 +14,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from nbcalib.report.uncertainty import AXIS_NAMES
+from nbcalib.wording import say
 
 if TYPE_CHECKING:
     from nbcalib.report.assessment import Quality
@@ -94,44 +95,44 @@ def _move_reasons(q: Quality) -> list[tuple[str, str]]:
     return reasons
 
 
-#: What to do next, one line per kind of reason (:attr:`Quality.next_steps`).
+#: What to do next, one line per kind of reason (:attr:`Quality.next_steps`). Settings are named
+#: as the API names them (:mod:`nbcalib.wording`); :func:`advice` spells them for the front end.
+_MEASURED_START = (
+    "start from a measured pose (run.force, run.init=X,Y,Z,QX,QY,QZ,QW) or from picked points "
+    "(run.force, run.manual=picks.json)"
+)
+_MORE_VIEWS = (
+    "add pairs seen from other places or headings (a folder of frames, inputs.frames=DIR, or "
+    "inputs.pair_count=N images of a recording) and calibrate them together"
+)
 ADVICE = {
     "few_points": (
         "Few LiDAR points land in the image: check the camera file (model, image size, "
-        "intrinsics) and the start; more scans per pair (--neighbors K) make a denser cloud."
+        "intrinsics) and the start; more scans per pair (preprocess.neighbors=K) make a denser "
+        "cloud."
     ),
     "no_information": (
-        "Check that each image and its LiDAR data show the same moment and place, then start "
-        "from a measured pose (nbcalib calibrate WORKDIR --force --init X,Y,Z,QX,QY,QZ,QW) or "
-        "from picked points (nbcalib initial-guess WORKDIR --manual picks.json)."
+        "Check that each image and its LiDAR data show the same moment and place, then "
+        f"{_MEASURED_START}."
     ),
     "flat": (
-        "This view does not pin the pose down: add pairs seen from other places or headings "
-        "(nbcalib run with --pair-count N or a folder of frames) and calibrate them together; "
-        "texture and structure at several depths help."
+        f"This view does not pin the pose down: {_MORE_VIEWS}; texture and structure at several "
+        "depths help."
     ),
     "not_at_minimum": (
         "The optimiser stopped short of the minimum: calibrate again from this result "
-        "(nbcalib calibrate WORKDIR --force --init with results.T_lidar_camera of calib.json)."
+        "(run.force, run.init set to results.T_lidar_camera of calib.json)."
     ),
-    "far_from_guess": (
-        "The start was probably wrong: start from a measured pose (nbcalib calibrate WORKDIR "
-        "--force --init X,Y,Z,QX,QY,QZ,QW) or from picked points (nbcalib initial-guess WORKDIR "
-        "--manual picks.json), then calibrate again."
-    ),
+    "far_from_guess": f"The start was probably wrong: {_MEASURED_START}, then calibrate again.",
     "pairs_disagree": (
         "Look at the named pairs' overlays (a wrong image, a time offset, motion during the "
         "pair): calibrate without them, or record them again."
     ),
-    "not_converged": (
-        "Calibrate again with more iterations: nbcalib calibrate WORKDIR --force --max-outer 20."
-    ),
+    "not_converged": ("Calibrate again with more iterations (run.force, refine.max_outer=20)."),
 }
 ADVICE["unstable"] = (
     "The cost has several minima near this result and which one registration finds depends on "
-    "the start: add pairs seen from other places or headings (nbcalib run with --pair-count N or "
-    "a folder of frames) and calibrate them together, or start from a measured pose "
-    "(nbcalib calibrate WORKDIR --force --init X,Y,Z,QX,QY,QZ,QW)."
+    f"the start: {_MORE_VIEWS}, or {_MEASURED_START}."
 )
 ADVICE["trust_edge"] = ADVICE["moved_far"] = ADVICE["far_from_guess"]
 ADVICE["rests_on"] = (
@@ -155,8 +156,8 @@ ONE_VIEW = (
 def advice(kind: str, q: Quality) -> str:
     """The line of advice for a reason of ``kind`` in this job (:data:`ADVICE`)."""
     if kind in ("flat", "unstable") and len(q.names) >= 2 and q.n_views == 1:
-        return ONE_VIEW
-    return ADVICE[kind]
+        return say(ONE_VIEW)
+    return say(ADVICE[kind])
 
 
 def pairs_elsewhere(offsets, own_covariances, bias_floor, quantile: float) -> list[float]:
