@@ -20,6 +20,7 @@ from nbcalib.io.calib_json import FINAL_STAGE
 from nbcalib.io.job_record import CalibrationRecord, PreprocessSummary, RunOptions
 from nbcalib.pipeline.guess import GuessSteps
 from nbcalib.pipeline.records import JobRecords, _detail, _uncertainty_record
+from nbcalib.pipeline.store import make_store
 from nbcalib.products import CalibrationResult, Start, as_stored_values
 from nbcalib.resume import plan_stages
 from nbcalib.wording import say
@@ -45,11 +46,9 @@ class Calibrator(GuessSteps, JobRecords):
 
     def __init__(self, config: CalibrationConfig | None = None, *, workdir=None, model_dir=None):
         self.config = config or CalibrationConfig()
-        self.work = (
-            None
-            if workdir is None
-            else (workdir if isinstance(workdir, WorkDir) else WorkDir(workdir))
-        )
+        #: Where the products go (:mod:`nbcalib.pipeline.store`): the work directory, or
+        #: memory only.
+        self.store = make_store(workdir)
         self.model_dir = model_dir
         self.camera = None
         self.virtual = None
@@ -77,6 +76,14 @@ class Calibrator(GuessSteps, JobRecords):
         #: (:mod:`nbcalib.rig_pipeline`; each with its ``T_camera_rig``).
         self.rig_pairs: list = []
         self._adopted: tuple | None = None  # (T_camera_lidar, source): a result found elsewhere
+
+    @property
+    def work(self):
+        """The job's :class:`~nbcalib.workdir.WorkDir`, None in memory.
+
+        For callers that name its files; the Calibrator itself goes through :attr:`store`.
+        """
+        return self.store.work
 
     # ================================================================ the method
     def run(
@@ -139,8 +146,7 @@ class Calibrator(GuessSteps, JobRecords):
             skip.setdefault("initial-guess", f"starting from {given.source}")
         elif manual is not None:
             skip.setdefault("find-matches", "run.manual")
-        if self.work is not None:
-            self.work.check_writable()
+        self.store.check_writable()
         plan = plan_stages(
             self, only=only, until=until, redo_from=redo_from, overwrite=overwrite, skip=skip
         )
@@ -194,16 +200,14 @@ class Calibrator(GuessSteps, JobRecords):
         from nbcalib.preprocess.prepare import check_pairs, prepare_pair
 
         if self._inputs is None or getattr(self._inputs, "empty", False):
-            where = self.work.path if self.work is not None else None
             raise InputError(
                 "nothing to preprocess: give INPUT... WORKDIR (or inputs.points FILE "
                 "inputs.image FILE)",
-                where,
+                self.store.path,
             )
         pair_inputs, camera, data_path = self._inputs.gather(self.config.preprocess)
         check_pairs(pair_inputs, camera)
-        if self.work is not None:
-            self.work.prepare()
+        self.store.prepare()
         self.camera, self._data_path, self._topics = camera, data_path, pair_inputs[0].topics
         self._inputs_record = self._inputs.to_dict()
         # where the LiDAR sits in the clouds' frame: views and the LiDAR image are seen from there
@@ -223,9 +227,7 @@ class Calibrator(GuessSteps, JobRecords):
 
         self.virtual, self.pairs = render_pairs(pairs, origin=self._origin.xyz, log=_detail)
         self._forget_after("preprocess")
-        if self.work is None:
-            return self._remember("preprocess")
-        thread_map(self.work.write_pair, self.pairs)
+        thread_map(self.store.write_pair, self.pairs)
         topics = self._topics
         calib = make_calib(
             self.camera,
@@ -277,8 +279,7 @@ class Calibrator(GuessSteps, JobRecords):
         try:
             self.refinement = refine(pairs, start.T_camera_lidar, cfg, progress=progress)
         except InputError as exc:
-            where = None if self.work is None else self.work.calib_path
-            raise InputError(f"{exc} (start: {start.source})", where) from None
+            raise InputError(f"{exc} (start: {start.source})", self.store.calib_path) from None
         self.start = start
         self._forget_after("calibrate")
         calib = self._calib()
@@ -382,7 +383,7 @@ class Calibrator(GuessSteps, JobRecords):
             record.attempted_T_lidar_camera = as_stored_values(result.T_camera_lidar)
             calib.record.forget_made("calibrate")
             self._made.pop("calibrate", None)
-            self.work.write_calib(calib)
+            self.store.write_calib(calib)
         raise RegistrationFailed(message, result)
 
     def _assess(self) -> None:
@@ -391,8 +392,9 @@ class Calibrator(GuessSteps, JobRecords):
         T, start = self._result_pose(), self._report_start()
         pairs = self._registration_pairs()
         converged = None if self.refinement is None else self.refinement.converged
-        if converged is None and self.work is not None:
-            info = self._calib().record.calibration
+        calib = self._calib()
+        if converged is None and calib is not None:
+            info = calib.record.calibration
             converged = None if info is None else info.converged
         self.quality = assess(
             pairs,
@@ -405,14 +407,9 @@ class Calibrator(GuessSteps, JobRecords):
             progress=True,
         )
         _detail(f"verdict: {self.quality.verdict}")
-        if self.work is None:
-            return self._remember("report")
-        from nbcalib.report.html import write_report
-
         names = [p.name for p in pairs]
         loaded = [p for p in self._pairs() if p.name in names]
-        self.report = write_report(
-            self.work,
+        self.report = self.store.write_report(  # none in memory: the quality is the product
             self.quality,
             loaded,
             pairs,
@@ -423,7 +420,7 @@ class Calibrator(GuessSteps, JobRecords):
             progress=True,
         )
         calib = self._calib()
-        info = calib.record.calibration
+        info = None if calib is None else calib.record.calibration
         if start is not None and info is not None:  # the uncertainty the report judged by
             info.start_uncertainty = _uncertainty_record(start.uncertainty)
         self._remember("report", calib)
@@ -432,15 +429,11 @@ class Calibrator(GuessSteps, JobRecords):
     def result(self) -> CalibrationResult | None:
         """The job's result so far (None before fine registration has run or been loaded)."""
         adopted = self._adopted is not None
-        if (
-            self.refinement is None
-            and not adopted
-            and (self.work is None or not self._has(FINAL_STAGE))
-        ):
+        if self.refinement is None and not adopted and not self._has(FINAL_STAGE):
             return None
         start = self._start_pose(required=False)
         values = self.result_values if self.refinement is not None or adopted else None
-        values = values or self.work.read_calib().results[FINAL_STAGE]
+        values = values or self._calib().results[FINAL_STAGE]
         return CalibrationResult(
             values=tuple(values),
             T_camera_lidar=self._result_pose(),
@@ -453,7 +446,7 @@ class Calibrator(GuessSteps, JobRecords):
             quality=self.quality,
             matches=list(self.matches.values()),
             virtual_camera=self.virtual,
-            workdir=None if self.work is None else self.work.path,
+            workdir=self.store.path,
             seconds=dict(self.seconds),
         )
 
@@ -473,7 +466,7 @@ class Calibrator(GuessSteps, JobRecords):
         return Start.from_values(self.result_values, FINAL_STAGE).T_camera_lidar
 
     def _calib(self):
-        return None if self.work is None else self.work.read_calib()
+        return self.store.read_calib()
 
     def _has(self, stage: str) -> bool:
         calib = self._calib()
@@ -481,20 +474,20 @@ class Calibrator(GuessSteps, JobRecords):
 
     def _camera(self):
         if self.camera is None:
-            self.camera = self.work.require_preprocessed().camera_model()
+            self.camera = self.store.require_preprocessed().camera_model()
         return self.camera
 
     def _virtual(self):
-        if self.virtual is None and self.work is not None:
+        calib = self._calib() if self.virtual is None else None
+        if calib is not None:
             from nbcalib.workdir import get_virtual_camera
 
-            self.virtual = get_virtual_camera(self.work.read_calib())
+            self.virtual = get_virtual_camera(calib)
         return self.virtual
 
     def _pairs(self) -> list:
         if self.pairs is None:
-            self.work.require_preprocessed()
-            self.pairs = self.work.load_pairs()
+            self.pairs = self.store.load_pairs()
         return self.pairs
 
     def _registration_pairs(self) -> list:
@@ -526,11 +519,11 @@ class Calibrator(GuessSteps, JobRecords):
     def _result_pose(self) -> np.ndarray:
         if self.refinement is not None or self._adopted is not None:
             return self.T_result
-        calib = self.work.read_calib()
-        if not calib.has_result(FINAL_STAGE):
+        calib = self._calib()
+        if calib is None or not calib.has_result(FINAL_STAGE):
             raise InputError(
                 "no calibration result (results.T_lidar_camera): run nbcalib calibrate first",
-                self.work.calib_path,
+                self.store.calib_path,
             )
         return calib.get_T_camera_lidar(FINAL_STAGE)
 

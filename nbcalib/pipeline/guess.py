@@ -9,7 +9,6 @@ pose when the automatic guess fails.
 
 from __future__ import annotations
 
-import json
 import logging
 
 import numpy as np
@@ -72,8 +71,7 @@ class GuessSteps:
                 )
                 _detail(found.summary())
                 self.matches[pair.name] = found
-                if self.work is not None:
-                    self.work.write_matches(found, pair, draw=cfg.matching.draw)
+                self.store.write_matches(found, pair, draw=cfg.matching.draw)
         self._forget_after("find-matches")
         self._remember("find-matches", self._calib())
 
@@ -120,8 +118,7 @@ class GuessSteps:
                 )
                 matched, draw = unmatched_pair(pair, matching.matcher, reason), False
             self.matches[pair.name] = matched
-            if self.work is not None:
-                self.work.write_matches(matched, pair, draw=draw)
+            self.store.write_matches(matched, pair, draw=draw)
         self._recording = found
 
     def _initial_guess(self) -> None:
@@ -235,26 +232,19 @@ class GuessSteps:
             if pair.name in self.matches:
                 part = self.matches[pair.name].correspondences
             else:
-                part = self.work.read_correspondences(pair, search_radius=search_radius)
+                part = self.store.read_correspondences(pair, search_radius=search_radius)
             log.debug(
                 "    %s: %d matches, %d 2D-3D correspondences", pair.name, part.n_matches, len(part)
             )
             parts.append(part)
-        where = self.work.path if self.work is not None else None
         self._guess_parts = parts
-        return pool_correspondences(parts), AUTO_STAGE, where
+        return pool_correspondences(parts), AUTO_STAGE, self.store.path
 
     def _matcher_name(self) -> str:
         """Which matcher made the correspondences ("xfeat-lighterglue"; "keypoint" if unknown)."""
         names = {m.matcher for m in self.matches.values()} if self.matches else set()
-        if not names and self.work is not None:
-            for pair in self._pairs():
-                try:
-                    doc = json.loads(self.work.correspondences_path(pair.name).read_text())
-                except (OSError, ValueError):
-                    continue
-                if isinstance(doc, dict) and isinstance(doc.get("matcher"), str):
-                    names.add(doc["matcher"])
+        if not names:  # matched by an earlier run: the kept correspondences say
+            names = self.store.matcher_names(self._pairs())
         return " + ".join(sorted(names)) or "keypoint"
 
     def _lidar_origin(self):

@@ -15,7 +15,7 @@ import time
 
 import numpy as np
 
-from nbcalib.config import config_to_dict, write_config
+from nbcalib.config import config_to_dict
 from nbcalib.errors import InputError
 from nbcalib.io.calib_json import AUTO_STAGE, FINAL_STAGE
 from nbcalib.io.job_record import CalibrationRecord, RunOptions
@@ -78,7 +78,7 @@ class JobRecords:
             return None
         raise InputError(
             "no initial guess in calib.json: run nbcalib initial-guess first, or pass run.init",
-            None if self.work is None else self.work.calib_path,
+            self.store.calib_path,
         )
 
     # ================================================================ records
@@ -132,8 +132,8 @@ class JobRecords:
             record.inputs = self._inputs_record
         if self.run_options is not None:
             record.run = RunOptions.from_dict(_plain(self.run_options.to_dict()))
-        self.work.write_calib(calib)
-        write_config(self.work.config_path, self.config, {"inputs": record.inputs})
+        self.store.write_calib(calib)
+        self.store.write_config(self.config, {"inputs": record.inputs})
 
     def _forget_after(self, stage: str) -> None:
         """A stage ran: what later stages made from its old product no longer holds.
@@ -145,10 +145,10 @@ class JobRecords:
         later = STAGES[STAGES.index(stage) + 1 :]
         for name in later:
             self._made.pop(name, None)
-        calib = self._calib() if self.work is not None and self.work.is_complete() else None
+        calib = self._calib() if self.store.is_complete() else None
         if calib is None or stage == "report":
             return
-        self.work.remove_derived()
+        self.store.remove_derived()
         for name in later:
             calib.record.forget_made(name)
         stale = {"find-matches": (AUTO_STAGE, FINAL_STAGE), "initial-guess": (FINAL_STAGE,)}
@@ -160,7 +160,7 @@ class JobRecords:
                 calib.record.initial_guess.failed = None
             calib.record.calibration = None
         calib.record.quality = None
-        self.work.write_calib(calib)
+        self.store.write_calib(calib)
 
 
 def _plain(value):
