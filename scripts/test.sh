@@ -12,4 +12,6 @@ echo "[nbcalib] ruff"
 python -m ruff check .
 python -m ruff format --check .
 echo "[nbcalib] pytest"
-python -m pytest "$@"
+# both cores, one test module per worker (its module-scoped fixtures made once);
+# NBCALIB_TEST_WORKERS=0 runs the suite in this process
+python -m pytest -n "${NBCALIB_TEST_WORKERS:-2}" --dist loadfile "$@"

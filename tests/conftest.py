@@ -47,13 +47,8 @@ def no_learned_models(tmp_path, monkeypatch):
     return hide_learned_models(monkeypatch, tmp_path / "no-models")
 
 
-@pytest.fixture(autouse=True)
-def _restore_nbcalib_logging():
-    """Each test starts with the ``nbcalib`` logger as the last left it was, and ends so.
-
-    ``nbcalib.cli.main`` gives the logger a stderr handler and a level per command line;
-    the handler of one test's ``main`` would otherwise outlive that test's captured stderr.
-    """
+def _kept_nbcalib_logging():
+    """Leave the ``nbcalib`` logger as it was found (its handlers and level)."""
     import logging
 
     logger = logging.getLogger("nbcalib")
@@ -63,3 +58,21 @@ def _restore_nbcalib_logging():
         if handler not in handlers:
             logger.removeHandler(handler)
     logger.setLevel(level)
+
+
+@pytest.fixture(autouse=True)
+def _restore_nbcalib_logging():
+    """Each test starts with the ``nbcalib`` logger as the last left it was, and ends so.
+
+    ``nbcalib.cli.main`` gives the logger a stderr handler and a level per command line;
+    the handler of one test's ``main`` would otherwise outlive that test's captured stderr.
+    """
+    yield from _kept_nbcalib_logging()
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _restore_nbcalib_logging_per_module():
+    """The same around each test module: a module-scoped fixture that runs ``main`` (outside
+    any one test) does not leave its handler to the modules after it, whichever order the
+    modules run in (``pytest -n 2`` gives each worker its own order)."""
+    yield from _kept_nbcalib_logging()
