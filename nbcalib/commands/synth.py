@@ -43,6 +43,12 @@ to OUT/<camera>/pair_NNN.png and OUT/<camera>/camera.yaml beside the shared pair
 get /<camera>/image and /<camera>/camera_info per camera; ground_truth.json keeps cam0 at the
 top and lists every camera under "cameras" (with T_cam0_camera, the rig).
 
+--given-focal-scale S, --given-center-shift DX,DY and --given-distortion-scale S hand the
+calibrator intrinsics that differ from the camera that rendered the images (one camera, any
+model but equirectangular, whose intrinsics are its image size): OUT/camera.yaml and the bags'
+camera_info hold fx, fy times S, cx, cy plus DX, DY pixels and the distortion times S;
+ground_truth.json keeps both cameras and the offset under "intrinsics".
+
 --without EFFECTS turns single camera/LiDAR differences off, each on its own, to measure what
 each one costs a calibration (none by default: the rig above, bit for bit); ground_truth.json
 records them as "without". lidar-texture, materials and elements act on the LiDAR's designed
@@ -58,6 +64,7 @@ examples:
   nbcalib synth out --lidar spinning16 --format bag1 --duration 4 --image-size 640x480
   nbcalib synth out --lidar spinning128 --scene street --motion drive --format mcap
   nbcalib synth out --T-lidar-camera 0.05,-0.1,0.02,0.5,-0.5,0.5,-0.5
+  nbcalib synth out --camera fisheye --pairs 10 --given-focal-scale 1.015 --given-center-shift 5,-5
   nbcalib synth out --lidar spinning64 --without motion,lidar-noise,optics
   nbcalib synth out --cameras pinhole,fisheye,fisheye --format bag2
   nbcalib synth out --cameras pinhole:1280x960,fisheye:800x800 --lidar livox
@@ -102,6 +109,26 @@ def _cameras(text: str) -> tuple[str, ...]:
         if model not in CAMERAS:
             raise InputError(f"--cameras: unknown camera {model!r}; expected one of {CAMERAS}")
     return entries
+
+
+def _given(args):
+    """The ``--given-*`` options as a GivenIntrinsics (None: the true intrinsics)."""
+    from nbcalib.errors import InputError
+    from nbcalib.synthetic.intrinsics import GivenIntrinsics
+
+    try:
+        shift = [float(v) for v in str(args.given_center_shift).split(",")]
+        if len(shift) != 2:
+            raise ValueError(f"--given-center-shift takes DX,DY, got {args.given_center_shift!r}")
+        given = GivenIntrinsics(args.given_focal_scale, tuple(shift), args.given_distortion_scale)
+        if given.exact:
+            return None
+        if args.cameras is not None:
+            raise ValueError("--given-* take one camera, not --cameras")
+        given.check(args.camera)
+    except ValueError as exc:
+        raise InputError(f"--given-*: {exc}") from None
+    return given
 
 
 def add_parser(subparsers, formatter_class) -> argparse.ArgumentParser:
@@ -178,6 +205,13 @@ def add_parser(subparsers, formatter_class) -> argparse.ArgumentParser:
         help="ground-truth extrinsics as in calib.json (p_lidar = T_lidar_camera p_camera; "
         "default: drawn from the seed like a real rig, 5-30 cm, any direction)",
     )
+    given = p.add_argument_group("intrinsics given to the calibrator (default: the true ones)")
+    given.add_argument("--given-focal-scale", type=float, default=1.0, metavar="S",
+                       help="fx, fy given = true times S")  # fmt: skip
+    given.add_argument("--given-center-shift", default="0,0", metavar="DX,DY",
+                       help="cx, cy given = true plus DX, DY pixels")  # fmt: skip
+    given.add_argument("--given-distortion-scale", type=float, default=1.0, metavar="S",
+                       help="distortion coefficients given = true times S")  # fmt: skip
     p.add_argument(
         "--parallel",
         action="store_true",
@@ -234,8 +268,9 @@ def run(args) -> int:
         parallel=args.parallel,
         cameras=cameras,
     )
+    given = _given(args)
     start = time.perf_counter()
-    truth = export_dataset(config, out, pairs=args.pairs, fmt=args.fmt, progress=True)
+    truth = export_dataset(config, out, pairs=args.pairs, fmt=args.fmt, progress=True, given=given)
     points = sum(p["num_points"] for p in truth["pairs"])
     sensors = args.camera if not cameras else f"{len(cameras)} cameras ({','.join(cameras)})"
     print(

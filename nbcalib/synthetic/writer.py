@@ -42,6 +42,7 @@ import numpy as np
 
 from nbcalib.io._files import write_text_atomic
 from nbcalib.progress import Progress
+from nbcalib.synthetic.intrinsics import GivenIntrinsics
 from nbcalib.synthetic.lidar import LidarScan
 from nbcalib.synthetic.rig import (
     RigConfig,
@@ -150,7 +151,13 @@ def write_sequence_files(
 
 
 def write_sequence_bag(
-    sequence: SyntheticSequence, path, fmt: str, *, stamp_ns: int, ring: list | None = None
+    sequence: SyntheticSequence,
+    path,
+    fmt: str,
+    *,
+    stamp_ns: int,
+    ring: list | None = None,
+    given: GivenIntrinsics | None = None,
 ) -> None:
     """Write one pair as a ROS bag: tf_static, camera_info, the image, then every scan.
 
@@ -170,6 +177,8 @@ def write_sequence_bag(
     ring : list of (str, SyntheticSequence), optional
         Every camera of a ring with its sequence (``sequence`` is the first's): each camera's
         transform, camera info and image on its own topics (:func:`ring_topics`).
+    given : GivenIntrinsics, optional
+        The camera info holds these intrinsics instead of the true ones (one camera).
     """
     from nbcalib.io.bag_writer import BagWriter
 
@@ -182,7 +191,8 @@ def write_sequence_bag(
         for frame, seq, _ in views:
             bag.write_tf_static(stamp_ns, lidar, frame, seq.T_lidar_camera)
         for frame, seq, topics in views:
-            bag.write_camera_info(topics["camera_info"], stamp_ns, seq.camera, frame)
+            info = seq.camera if given is None else given.apply(seq.camera)
+            bag.write_camera_info(topics["camera_info"], stamp_ns, info, frame)
             bag.write_image(topics["image"], stamp_ns, seq.image, frame)
         for scan in sequence.output_scans():
             scan_stamp = stamp_ns + round(scan.stamp * 1e9)
@@ -270,6 +280,7 @@ def export_dataset(
     pairs: int = 1,
     fmt: str = "files",
     progress: bool | Callable[[int, int, str], None] | None = None,
+    given: GivenIntrinsics | None = None,
 ) -> dict:
     """Simulate ``pairs`` pairs and write them, the camera and the ground truth to ``out_dir``.
 
@@ -287,6 +298,10 @@ def export_dataset(
         ``True`` for a progress display (:class:`nbcalib.progress.Progress`: a bar on a
         terminal, step lines in a log, nothing when the ``nbcalib`` logger is quiet), or
         ``progress(done, total, what)`` after each simulated or written step.
+    given : GivenIntrinsics, optional
+        Write intrinsics that differ from the camera that rendered the images
+        (:mod:`nbcalib.synthetic.intrinsics`; one camera, not a ring): ``camera.yaml`` and the
+        bags' camera info hold them, ``ground_truth.json`` both cameras under ``intrinsics``.
 
     Returns
     -------
@@ -299,6 +314,12 @@ def export_dataset(
         raise ValueError(f"fmt must be one of {FORMATS}, got {fmt!r}")
     if pairs < 1:
         raise ValueError(f"pairs must be >= 1, got {pairs}")
+    if given is not None and given.exact:
+        given = None
+    if given is not None and config.cameras:
+        raise ValueError("given intrinsics are for one camera, not a ring")
+    if given is not None:  # before the simulation, not after it
+        given.check(config.camera if config.camera_model is None else config.camera_model.model)
     out_dir = Path(out_dir)
     out_dir.mkdir(parents=True, exist_ok=True)
     truth_path = out_dir / "ground_truth.json"
@@ -312,18 +333,26 @@ def export_dataset(
             display.total = total
             display.update(done - display.done, what)
 
-        infos, T_camera_lidar, camera = _export_pairs(config, out_dir, pairs, fmt, report)
-    save_camera(out_dir / "camera.yaml", camera)
+        infos, T_camera_lidar, camera = _export_pairs(config, out_dir, pairs, fmt, report, given)
+    save_camera(out_dir / "camera.yaml", camera if given is None else given.apply(camera))
     ring = ring_cameras(config) if config.cameras else None
     for r in ring or ():
         (out_dir / r.name).mkdir(parents=True, exist_ok=True)
         save_camera(out_dir / r.name / "camera.yaml", r.camera)
     truth = ground_truth_dict(config, infos, T_camera_lidar, ring=ring)
+    if given is not None:  # the camera that rendered the images, and the one the user has
+        truth["intrinsics"] = {
+            "rendered": camera.to_dict(),
+            "given": given.apply(camera).to_dict(),
+            "offset": given.to_dict(),
+        }
     write_text_atomic(truth_path, json.dumps(truth, indent=2, sort_keys=True) + "\n")
     return truth
 
 
-def _export_pairs(config: RigConfig, out_dir: Path, pairs: int, fmt: str, report) -> tuple:
+def _export_pairs(
+    config: RigConfig, out_dir: Path, pairs: int, fmt: str, report, given=None
+) -> tuple:
     """Simulate and write each pair; ``(infos, T_camera_lidar, camera)`` of the last one."""
     infos = []
     T_camera_lidar = None
@@ -351,7 +380,9 @@ def _export_pairs(config: RigConfig, out_dir: Path, pairs: int, fmt: str, report
         else:
             bag_name = f"{name}.bag" if fmt == "bag1" else name
             _remove(out_dir / bag_name)
-            write_sequence_bag(sequence, out_dir / bag_name, fmt, stamp_ns=stamp_ns, ring=ring)
+            write_sequence_bag(
+                sequence, out_dir / bag_name, fmt, stamp_ns=stamp_ns, ring=ring, given=given
+            )
             written = {"bag": bag_name}
         infos.append(_sequence_info(sequence, stamp_ns, written))
         T_camera_lidar = sequence.T_camera_lidar
