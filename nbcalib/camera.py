@@ -208,6 +208,39 @@ class CameraModel:
         uv, jac, valid = _kb._project_jacobian(self.model_id, self.params, pts)
         return (uv[0], jac[0], valid[0]) if single else (uv, jac, valid)
 
+    def intrinsics_jacobian(self, points_camera) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Project points and return ``d(u, v) / d(fx, fy, cx, cy)``, exact for every model.
+
+        Every model with a focal length maps a point to normalised, distorted coordinates
+        ``(mx, my)`` by its lens alone and then to ``u = fx mx + cx``, ``v = fy my + cy``: the
+        derivative is ``[[mx, 0, 1, 0], [0, my, 0, 1]]`` whatever the lens, with
+        ``mx = (u - cx) / fx`` (the distortion and omnidir's ``xi`` act before ``K``). What
+        refining the focal length and the principal point with the extrinsic needs (issue 47).
+
+        Returns
+        -------
+        uv : ndarray of shape (N, 2), float64
+        jacobian : ndarray of shape (N, 2, 4), float64
+            Pixels per unit of ``fx``, ``fy`` (pixels per pixel of focal length) and per pixel
+            of ``cx``, ``cy``.
+        valid : ndarray of shape (N,), bool
+
+        Raises
+        ------
+        ValueError
+            For the equirectangular model, whose intrinsics are its image size.
+        """
+        if self.model == "equirectangular":
+            raise ValueError("an equirectangular camera has no focal length or principal point")
+        uv, valid = self.project(points_camera)
+        fx, fy, cx, cy = self.intrinsics[:4]
+        flat = np.atleast_2d(uv)
+        jac = np.zeros((len(flat), 2, 4))
+        jac[:, 0, 0] = (flat[:, 0] - cx) / fx
+        jac[:, 1, 1] = (flat[:, 1] - cy) / fy
+        jac[:, 0, 2] = jac[:, 1, 3] = 1.0
+        return (uv, jac[0], valid) if np.ndim(uv) == 1 else (uv, jac, valid)
+
     def unproject(self, uv) -> np.ndarray:
         """Unit bearing vectors of pixel positions. Wraps ``kernels.unprojection._unproject``.
 

@@ -190,6 +190,30 @@ def test_jacobian_matches_finite_differences(name, rng):
     assert_allclose(J / scale, numeric / scale, **TOL["jacobian_vs_finite_diff"])
 
 
+@pytest.mark.parametrize("name", [m for m in CAMERA_MODELS if m != "equirectangular"])
+def test_intrinsics_jacobian_matches_finite_differences(name, rng):
+    """d(u, v) / d(fx, fy, cx, cy) of every model against central differences of the
+    projection with each intrinsic moved (issue 47: the focal length refined with the pose)."""
+    cam = make(name)
+    pts, _ = points_in_view(cam, rng, n=300)
+    uv, J, valid = cam.intrinsics_jacobian(pts)
+    assert valid.all() and J.shape == (len(pts), 2, 4)
+    assert_allclose(uv, cam.project(pts)[0], rtol=0, atol=0)
+    numeric = np.empty_like(J)
+    for k in range(4):
+        h = 1e-4 * max(1.0, abs(cam.intrinsics[k]))
+        moved = []
+        for sign in (1.0, -1.0):
+            intr = np.array(cam.intrinsics, dtype=np.float64)
+            intr[k] += sign * h
+            other = create_camera(cam.model, intr, cam.distortion_coeffs, cam.width, cam.height)
+            moved.append(other.project(pts)[0])
+        numeric[:, :, k] = (moved[0] - moved[1]) / (2 * h)
+    assert_allclose(J, numeric, rtol=1e-6, atol=1e-7)
+    with pytest.raises(ValueError, match="equirectangular"):
+        make("equirectangular").intrinsics_jacobian(pts[:3])
+
+
 def test_series_branches_are_continuous():
     """fisheye and atan switch to series near the axis; values agree across the switch."""
     for name in ("fisheye", "atan"):
