@@ -1,0 +1,142 @@
+"""Does the cost see a focal length that is off? The lab and the real sets (issue 47).
+
+**Synthetic** (the truth of both cameras exact): per camera model and focal offset,
+``nbcalib synth OUT --camera M --pairs P --given-focal-scale S`` (the images rendered with the
+true camera, ``camera.yaml`` the offset one), ``nbcalib preprocess`` of the pairs with that
+camera, then :func:`nbcalib.report.intrinsics.focal_scan` (the job's summed cost over focal
+scales of the given camera) at the true pose, and ``nbcalib calibrate --init <truth>`` +
+``nbcalib evaluate``, and the scan again at the result. At the true pose the lowest cost should
+lie at ``1 / S`` (the scale that gives back the true focal length); at the result, the pose has
+absorbed what it could.
+
+**Real** (``--real``, ``../shared/data/real``): the same scan at each set's reference pose on
+its preprocessed work directory (``--real-work NAME=DIR``, made with ``nbcalib run`` or
+``preprocess``): ACFR's fisheye is thought ~1 % off (BENCHMARKS 5.7), KITTI's exact.
+
+Run:  python benchmarks/bench_intrinsics.py [--models pinhole,fisheye] [--offsets 1,1.015,0.985]
+Prints a Markdown table and one JSON line.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from nbcalib.config import CalibrationConfig
+from nbcalib.io.ground_truth import read_ground_truth
+from nbcalib.registration.pair import RegistrationPair
+from nbcalib.report.intrinsics import focal_scan
+from nbcalib.transforms import invert_T, pose_to_xyz_quat
+from nbcalib.workdir import WorkDir
+
+
+def nbcalib(*args) -> subprocess.CompletedProcess:
+    run = subprocess.run(
+        [sys.executable, "-m", "nbcalib", *map(str, args)], capture_output=True, text=True
+    )
+    if run.returncode != 0:
+        raise RuntimeError(f"nbcalib {' '.join(map(str, args))}:\n{run.stderr[-2000:]}")
+    return run
+
+
+def registration_pairs(work: Path) -> list:
+    wd = WorkDir(work)
+    camera = wd.require_preprocessed().camera_model()
+    return [
+        RegistrationPair(camera, p.image, p.points_lidar, p.intensities, p.name)
+        for p in wd.load_pairs()
+    ]
+
+
+def scan(work: Path, T, config) -> dict:
+    t0 = time.perf_counter()
+    found = focal_scan(registration_pairs(work), T, config).to_dict()
+    found["seconds"] = round(time.perf_counter() - t0, 1)
+    return found
+
+
+def synthetic_case(model, offset, args, root: Path, config) -> dict:
+    out, work = root / f"{model}_{offset:g}" / "synth", root / f"{model}_{offset:g}" / "work"
+    if not (work / "calib.json").is_file():
+        shutil.rmtree(out.parent, ignore_errors=True)
+        nbcalib("synth", out, "--lidar", args.lidar, "--camera", model, "--scene", args.scene,
+                "--pairs", args.pairs, "--seed", args.seed,
+                "--given-focal-scale", f"{offset:g}")  # fmt: skip
+        inputs = []
+        for k in range(args.pairs):
+            scans = sorted((out / f"pair_{k:03d}_scans").glob("*.pcd"))
+            inputs += ["--points", *(scans or [out / f"pair_{k:03d}.pcd"])]
+        if args.pairs == 1:
+            nbcalib("preprocess", *inputs, "--image", out / "pair_000.png",
+                    "--camera", out / "camera.yaml", work)  # fmt: skip
+        else:  # several pairs: the images with their scans, one pair per image
+            images = [out / f"pair_{k:03d}.png" for k in range(args.pairs)]
+            clouds = [out / f"pair_{k:03d}.pcd" for k in range(args.pairs)]
+            nbcalib("preprocess", *clouds, "--images", *images,
+                    "--camera", out / "camera.yaml", work)  # fmt: skip
+    gt = out / "ground_truth.json"
+    T_true = read_ground_truth(gt)
+    row = {"model": model, "offset": offset, "expected": 1.0 / offset}
+    row["at_truth"] = scan(work, T_true, config)
+    init = ",".join(f"{v:.12g}" for v in pose_to_xyz_quat(invert_T(T_true)))
+    scratch = work.parent / "calibrated"
+    shutil.rmtree(scratch, ignore_errors=True)
+    shutil.copytree(work, scratch)
+    nbcalib("calibrate", scratch, f"--init={init}")
+    ev = json.loads(nbcalib("evaluate", scratch, "--ground-truth", gt).stdout.splitlines()[-1])
+    row["walk_cm"] = 100 * ev["translation_error_m"]
+    row["walk_deg"] = ev["rotation_error_deg"]
+    from nbcalib.io.calib_json import read_calib_json
+
+    T_result = read_calib_json(scratch / "calib.json").get_T_camera_lidar("T_lidar_camera")
+    row["at_result"] = scan(scratch, T_result, config)
+    print(
+        f"{model} x{offset:g}: best at truth {row['at_truth']['best']:.4f} (expected "
+        f"{row['expected']:.4f}), at result {row['at_result']['best']:.4f}; walk "
+        f"{row['walk_cm']:.2f} cm / {row['walk_deg']:.3f} deg",
+        file=sys.stderr,
+        flush=True,
+    )
+    return row
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
+    ap.add_argument("--models", default="pinhole,fisheye")
+    ap.add_argument("--offsets", default="1,1.015,0.985", help="given focal scales")
+    ap.add_argument("--lidar", default="spinning64")
+    ap.add_argument("--scene", default="room")
+    ap.add_argument("--pairs", type=int, default=1)
+    ap.add_argument("--seed", type=int, default=1)
+    ap.add_argument("--keep", type=Path, default=None, help="keep and reuse the data here")
+    args = ap.parse_args(argv)
+    root = args.keep or Path(tempfile.mkdtemp(prefix="nbcalib_intrinsics_"))
+    config = CalibrationConfig().refine
+    rows = [
+        synthetic_case(model, float(offset), args, root, config)
+        for model in args.models.split(",")
+        for offset in args.offsets.split(",")
+    ]
+    print("| model | given focal x | lowest cost at the truth (expected) | at the result | "
+          "walk from the truth |")  # fmt: skip
+    print("|---|---|---|---|---|")
+    for r in rows:
+        print(
+            f"| {r['model']} | {r['offset']:g} | {r['at_truth']['best']:.4f} "
+            f"({r['expected']:.4f}) | {r['at_result']['best']:.4f} | "
+            f"{r['walk_cm']:.2f} cm / {r['walk_deg']:.3f} deg |"
+        )
+    print(json.dumps({"args": vars(args) | {"keep": str(args.keep)}, "rows": rows}))
+    if args.keep is None:
+        shutil.rmtree(root, ignore_errors=True)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
