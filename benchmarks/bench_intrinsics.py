@@ -9,11 +9,13 @@ scales of the given camera) at the true pose, and ``nbcalib calibrate --init <tr
 lie at ``1 / S`` (the scale that gives back the true focal length); at the result, the pose has
 absorbed what it could.
 
-**Real** (``--real``, ``../shared/data/real``): the same scan at each set's reference pose on
-its preprocessed work directory (``--real-work NAME=DIR``, made with ``nbcalib run`` or
-``preprocess``): ACFR's fisheye is thought ~1 % off (BENCHMARKS 5.7), KITTI's exact.
+**Real** (``--real SETS``, ``../shared/data/real``, the sets of ``bench_real_frames.py``): each
+set's frames through ``nbcalib preprocess --frames DIR --camera FILE`` as a user types it, then
+the same scan at the set's reference pose: ACFR's fisheye is thought ~1 % off (BENCHMARKS 5.7),
+KITTI's intrinsics exact.
 
 Run:  python benchmarks/bench_intrinsics.py [--models pinhole,fisheye] [--offsets 1,1.015,0.985]
+      python benchmarks/bench_intrinsics.py --models "" --real acfr,kitti-odometry,kitti-raw
 Prints a Markdown table and one JSON line.
 """
 
@@ -106,6 +108,20 @@ def synthetic_case(model, offset, args, root: Path, config) -> dict:
     return row
 
 
+def real_case(name: str, spec: dict, root: Path, config) -> dict:
+    from bench_real_frames import reference_pose
+
+    work = root / f"real_{name}"
+    if not (work / "calib.json").is_file():
+        shutil.rmtree(work, ignore_errors=True)
+        nbcalib("preprocess", "--frames", spec["folder"], "--camera", spec["camera"],
+                *spec.get("options", []), work)  # fmt: skip
+    T_ref = reference_pose(spec.get("reference", spec["camera"]))
+    row = {"set": name, "at_reference": scan(work, T_ref, config)}
+    print(f"{name}: best at the reference {row['at_reference']['best']:.4f}", file=sys.stderr)
+    return row
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
     ap.add_argument("--models", default="pinhole,fisheye")
@@ -115,14 +131,25 @@ def main(argv=None) -> int:
     ap.add_argument("--pairs", type=int, default=1)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--keep", type=Path, default=None, help="keep and reuse the data here")
+    ap.add_argument("--real", default="", help="real sets of bench_real_frames.py, comma-separated")
     args = ap.parse_args(argv)
     root = args.keep or Path(tempfile.mkdtemp(prefix="nbcalib_intrinsics_"))
     config = CalibrationConfig().refine
     rows = [
         synthetic_case(model, float(offset), args, root, config)
-        for model in args.models.split(",")
+        for model in filter(None, args.models.split(","))
         for offset in args.offsets.split(",")
     ]
+    real = []
+    if args.real:
+        from bench_real_frames import DATA, sets
+
+        available = sets(DATA) if DATA.is_dir() else {}
+        for name in args.real.split(","):
+            if name not in available:
+                print(f"{name}: no data, skipped", file=sys.stderr)
+                continue
+            real.append(real_case(name, available[name], root, config))
     print("| model | given focal x | lowest cost at the truth (expected) | at the result | "
           "walk from the truth |")  # fmt: skip
     print("|---|---|---|---|---|")
@@ -132,7 +159,14 @@ def main(argv=None) -> int:
             f"({r['expected']:.4f}) | {r['at_result']['best']:.4f} | "
             f"{r['walk_cm']:.2f} cm / {r['walk_deg']:.3f} deg |"
         )
-    print(json.dumps({"args": vars(args) | {"keep": str(args.keep)}, "rows": rows}))
+    if real:
+        print("\n| real set | lowest cost at the reference pose (focal scale) | scan s |")
+        print("|---|---|---|")
+        for r in real:
+            scan_row = r["at_reference"]
+            edge = " (at the scan's edge)" if scan_row["at_edge"] else ""
+            print(f"| {r['set']} | {scan_row['best']:.4f}{edge} | {scan_row['seconds']} |")
+    print(json.dumps({"args": vars(args) | {"keep": str(args.keep)}, "rows": rows, "real": real}))
     if args.keep is None:
         shutil.rmtree(root, ignore_errors=True)
     return 0
