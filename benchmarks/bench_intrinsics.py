@@ -2,9 +2,10 @@
 
 **Synthetic** (the truth of both cameras exact): per camera model and focal offset,
 ``nbcalib synth OUT --camera M --pairs P --given-focal-scale S`` (the images rendered with the
-true camera, ``camera.yaml`` the offset one), ``nbcalib preprocess`` of the pairs with that
-camera, then :func:`nbcalib.report.intrinsics.focal_scan` (the job's summed cost over focal
-scales of the given camera) at the true pose, and ``nbcalib calibrate --init <truth>`` +
+true camera, ``camera.yaml`` the offset one; several pairs as one ROS 2 bag each, their
+``camera_info`` the offset camera), ``nbcalib preprocess`` of the pairs with that camera,
+then :func:`nbcalib.report.intrinsics.focal_scan` (the job's summed cost over focal scales of
+the given camera) at the true pose, and ``nbcalib calibrate --init <truth>`` +
 ``nbcalib evaluate``, and the scan again at the result. At the true pose the lowest cost should
 lie at ``1 / S`` (the scale that gives back the true focal length); at the result, the pose has
 absorbed what it could.
@@ -67,20 +68,15 @@ def synthetic_case(model, offset, args, root: Path, config) -> dict:
     out, work = root / f"{model}_{offset:g}" / "synth", root / f"{model}_{offset:g}" / "work"
     if not (work / "calib.json").is_file():
         shutil.rmtree(out.parent, ignore_errors=True)
+        several = ["--format", "bag2"] if args.pairs > 1 else []
         nbcalib("synth", out, "--lidar", args.lidar, "--camera", model, "--scene", args.scene,
-                "--pairs", args.pairs, "--seed", args.seed,
+                "--pairs", args.pairs, "--seed", args.seed, *several,
                 "--given-focal-scale", f"{offset:g}")  # fmt: skip
-        inputs = []
-        for k in range(args.pairs):
-            scans = sorted((out / f"pair_{k:03d}_scans").glob("*.pcd"))
-            inputs += ["--points", *(scans or [out / f"pair_{k:03d}.pcd"])]
-        if args.pairs == 1:
-            nbcalib("preprocess", *inputs, "--image", out / "pair_000.png",
-                    "--camera", out / "camera.yaml", work)  # fmt: skip
-        else:  # several pairs: the images with their scans, one pair per image
-            images = [out / f"pair_{k:03d}.png" for k in range(args.pairs)]
-            clouds = [out / f"pair_{k:03d}.pcd" for k in range(args.pairs)]
-            nbcalib("preprocess", *clouds, "--images", *images,
+        if args.pairs > 1:  # one bag per pair (its camera_info the given camera), as users have
+            nbcalib("preprocess", *[out / f"pair_{k:03d}" for k in range(args.pairs)], work)
+        else:
+            scans = sorted((out / "pair_000_scans").glob("*.pcd")) or [out / "pair_000.pcd"]
+            nbcalib("preprocess", "--points", *scans, "--image", out / "pair_000.png",
                     "--camera", out / "camera.yaml", work)  # fmt: skip
     gt = out / "ground_truth.json"
     T_true = read_ground_truth(gt)

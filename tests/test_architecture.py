@@ -247,3 +247,9 @@ def test_every_setting_a_message_names_has_a_flag():
         if m.group(1) in rooms and f"{m.group(1)}.{m.group(2)}" not in known
     ]
     assert not found, "names without a flag:\n" + "\n".join(found)
+
+
+def test_the_benchmarks_page_states_today_in_800_lines():
+    """docs/BENCHMARKS.md holds today's figures; their history goes to the CHANGELOG."""
+    page = PACKAGE.parent / "docs" / "BENCHMARKS.md"
+    assert len(page.read_text().splitlines()) <= 800
