@@ -343,3 +343,32 @@ def test_real_data_ground_truth_files(real_data):
         raw = np.array(json.loads(path.read_text())["T_cam_lidar"])
         np.testing.assert_allclose(T, raw, rtol=0, atol=1e-5)
         np.testing.assert_allclose(T[:3, :3] @ T[:3, :3].T, np.eye(3), rtol=0, atol=1e-12)
+
+
+def test_the_intrinsics_error_against_the_labs_true_camera(tmp_path, capsys, ground_truth):
+    """Against 'synth --given-*' ground truth the line adds the camera's error; otherwise not."""
+    workdir = make_workdir(tmp_path, {FINAL_STAGE: T_CAMERA_LIDAR_TRUE})
+    status, out, _ = run_cli(capsys, workdir, "--ground-truth", ground_truth)
+    assert status == 0 and "focal_error_percent" not in out
+    true = create_camera("pinhole", [490.0, 494.0, 317.0, 244.0], [], 640, 480)
+    lab = json.loads(ground_truth.read_text())
+    lab["intrinsics"] = {"rendered": true.to_dict(), "given": {}, "offset": {}}
+    ground_truth.write_text(json.dumps(lab))
+    status, out, err = run_cli(capsys, workdir, "--ground-truth", ground_truth)
+    assert status == 0, err
+    result = json.loads(out)
+    # the work directory's camera: fx = fy = 500, (320, 240)
+    assert result["focal_error_percent"] == pytest.approx(100 * (500 / 492 - 1), rel=1e-12)
+    assert result["center_error_px"] == pytest.approx(5.0, rel=1e-12)
+    assert result["translation_error_m"] == pytest.approx(0.0, abs=1e-12)
+    # a bag's camera_info names a pinhole plumb_bob: any two models with a focal length compare
+    lab["intrinsics"]["rendered"] = create_camera("plumb_bob", [500, 500, 320, 240], [0] * 5,
+                                                  640, 480).to_dict()  # fmt: skip
+    ground_truth.write_text(json.dumps(lab))
+    status, out, _ = run_cli(capsys, workdir, "--ground-truth", ground_truth)
+    assert status == 0 and json.loads(out)["focal_error_percent"] == 0.0
+    lab["intrinsics"]["rendered"] = create_camera("equirectangular", [640, 480], [], 640, 480)
+    lab["intrinsics"]["rendered"] = lab["intrinsics"]["rendered"].to_dict()
+    ground_truth.write_text(json.dumps(lab))
+    status, _, err = run_cli(capsys, workdir, "--ground-truth", ground_truth)
+    assert status == 2 and "no focal length" in err and len(err.strip().splitlines()) == 1

@@ -33,7 +33,9 @@ Compare the extrinsic in WORKDIR/calib.json with a known answer and print one JS
 {"translation_error_m": ..., "rotation_error_deg": ..., "stage": ...}.
 The translation error is the camera-centre displacement in the LiDAR frame (metres), the
 rotation error the angle of R_est R_true^T (degrees); "stage" is the calib.json result judged
-(the final T_lidar_camera if present, else the most recent initial guess).
+(the final T_lidar_camera if present, else the most recent initial guess). Against the ground
+truth of 'nbcalib synth --given-*' (intrinsics other than the true ones) the line adds
+"focal_error_percent" and "center_error_px": the work directory's camera against the true one.
 
 For a several-camera job (WORKDIR/rig.json) and a camera ring's ground truth ('nbcalib synth
 --cameras'): the rig's line (the reference camera's errors, and the worst camera's), then one
@@ -92,8 +94,34 @@ def run(args: argparse.Namespace) -> int:
     if not (workdir / "calib.json").is_file():  # before the ground truth: the first thing missing
         raise InputError("no calib.json: run 'nbcalib preprocess' first", workdir / "calib.json")
     stage, errors = _evaluate(workdir, read_ground_truth(args.ground_truth), args)
-    print(json.dumps({**errors, "stage": stage}))
+    print(json.dumps({**errors, "stage": stage, **_intrinsics_errors(workdir, args.ground_truth)}))
     return 0
+
+
+def _intrinsics_errors(workdir: Path, ground_truth) -> dict:
+    """The work directory's camera against the lab's rendering camera (``synth --given-*``).
+
+    ``focal_error_percent`` (the mean of ``fx, fy`` against the truth's) and
+    ``center_error_px`` (the principal point's distance); nothing for other ground truths.
+    """
+    import numpy as np
+
+    from nbcalib.io.calib_json import read_calib_json
+    from nbcalib.io.ground_truth import read_ground_truth_camera
+
+    true = read_ground_truth_camera(ground_truth)
+    if true is None:
+        return {}
+    camera = read_calib_json(workdir / "calib.json").camera_model()
+    if "equirectangular" in (camera.model, true.model):  # intrinsics = image size: no focal
+        raise InputError(
+            f"the camera is {camera.model}, the ground truth's {true.model}: no focal length "
+            "to compare",
+            ground_truth,
+        )
+    focal = float(np.mean(camera.intrinsics[:2]) / np.mean(true.intrinsics[:2]) - 1.0)
+    center = float(np.hypot(*(np.asarray(camera.intrinsics[2:4]) - true.intrinsics[2:4])))
+    return {"focal_error_percent": 100.0 * focal, "center_error_px": center}
 
 
 def _evaluate(workdir: Path, T_camera_lidar_true, args) -> tuple[str, dict]:

@@ -23,7 +23,12 @@ from nbcalib.io.calib_json import (
     write_json,
 )
 
-__all__ = ["read_ground_truth", "read_ground_truth_cameras", "write_ground_truth"]
+__all__ = [
+    "read_ground_truth",
+    "read_ground_truth_camera",
+    "read_ground_truth_cameras",
+    "write_ground_truth",
+]
 
 
 def read_ground_truth_cameras(path: str | os.PathLike) -> dict[str, np.ndarray]:
@@ -51,6 +56,27 @@ def read_ground_truth_cameras(path: str | os.PathLike) -> dict[str, np.ndarray]:
             entry["T_lidar_camera"], what=what, path=path
         )
     return out
+
+
+def read_ground_truth_camera(path: str | os.PathLike):
+    """The camera that rendered the images of a lab ``ground_truth.json``, or None.
+
+    ``nbcalib synth --given-*`` keeps it under ``intrinsics.rendered`` (a camera's
+    ``to_dict``); other ground truths, and calib.json files, have none.
+    """
+    from nbcalib.camera import CameraModel
+
+    data = read_json(path)
+    entry = data.get("intrinsics") if isinstance(data, dict) else None
+    if entry is None:
+        return None
+    rendered = entry.get("rendered") if isinstance(entry, dict) else None
+    if not isinstance(rendered, dict):
+        raise InputError("intrinsics.rendered: expected the rendering camera", path)
+    try:
+        return CameraModel.from_dict(rendered)
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(f"intrinsics.rendered: {exc}", path) from None
 
 
 def read_ground_truth(path: str | os.PathLike) -> np.ndarray:
