@@ -46,6 +46,7 @@ __all__ = [
     "camera_to_camera_info",
     "create_camera",
     "example_camera",
+    "offset_intrinsics",
 ]
 
 
@@ -294,6 +295,27 @@ class CameraModel:
 
 
 # ------------------------------------------------------------------------------- factories
+
+
+def offset_intrinsics(
+    camera: CameraModel,
+    *,
+    focal_scale: float = 1.0,
+    center_shift=(0.0, 0.0),
+    distortion_scale: float = 1.0,
+) -> CameraModel:
+    """``camera`` with its focal length scaled, its principal point moved, its distortion scaled.
+
+    ``fx, fy`` times ``focal_scale``, ``cx, cy`` plus ``center_shift`` pixels, every distortion
+    coefficient times ``distortion_scale``; models with a focal length (omnidir's ``xi`` kept).
+    """
+    if camera.model == "equirectangular":
+        raise ValueError("an equirectangular camera has no focal length or principal point")
+    intrinsics = np.array(camera.intrinsics, dtype=np.float64)
+    intrinsics[:2] *= focal_scale
+    intrinsics[2:4] += center_shift
+    distortion = np.asarray(camera.distortion_coeffs, dtype=np.float64) * distortion_scale
+    return create_camera(camera.model, intrinsics, distortion, camera.width, camera.height)
 
 
 def create_camera(

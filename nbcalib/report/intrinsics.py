@@ -20,7 +20,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from nbcalib.camera import CameraModel, create_camera
+from nbcalib.camera import CameraModel, offset_intrinsics
 
 __all__ = ["FocalScan", "focal_scan", "scaled_focal"]
 
@@ -65,13 +65,7 @@ class FocalScan:
 
 def scaled_focal(camera: CameraModel, scale: float) -> CameraModel:
     """``camera`` with ``fx, fy`` times ``scale`` (everything else as it is)."""
-    if camera.model == "equirectangular":
-        raise ValueError("an equirectangular camera has no focal length")
-    intrinsics = np.array(camera.intrinsics, dtype=np.float64)
-    intrinsics[:2] *= scale
-    return create_camera(
-        camera.model, intrinsics, camera.distortion_coeffs, camera.width, camera.height
-    )
+    return offset_intrinsics(camera, focal_scale=scale)
 
 
 def _vertex(x: np.ndarray, y: np.ndarray) -> float:

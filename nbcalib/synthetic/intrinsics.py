@@ -18,9 +18,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-import numpy as np
-
-from nbcalib.camera import CameraModel, create_camera
+from nbcalib.camera import CameraModel, offset_intrinsics
 
 __all__ = ["GivenIntrinsics"]
 
@@ -68,11 +66,12 @@ class GivenIntrinsics:
     def apply(self, camera: CameraModel) -> CameraModel:
         """The camera the user is given, from the ``camera`` that rendered the image."""
         self.check(camera.model)
-        intrinsics = np.array(camera.intrinsics, dtype=np.float64)
-        intrinsics[:2] *= self.focal_scale
-        intrinsics[2:4] += self.center_shift
-        distortion = np.asarray(camera.distortion_coeffs, dtype=np.float64) * self.distortion_scale
-        return create_camera(camera.model, intrinsics, distortion, camera.width, camera.height)
+        return offset_intrinsics(
+            camera,
+            focal_scale=self.focal_scale,
+            center_shift=self.center_shift,
+            distortion_scale=self.distortion_scale,
+        )
 
     def to_dict(self) -> dict:
         """``{"focal_scale", "center_shift", "distortion_scale"}``, JSON-ready."""
