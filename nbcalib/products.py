@@ -219,7 +219,8 @@ class CalibrationResult:
     quality : Quality or None
         Uncertainty and verdict (None when the assessment did not run).
     camera : CameraModel
-        The camera.
+        The camera the result goes with: the one given, or the one fine registration refined
+        with it (``refine.intrinsics``; ``refinement.intrinsics`` tells how and whether).
     virtual_camera : VirtualCamera or None
         The camera of the LiDAR images.
     workdir : pathlib.Path or None

@@ -86,7 +86,7 @@ def test_nid_kernels_are_one_parallel_region(rng):
     padded = k.padded_image_bins(image_bins, 8)
     common = (cam.model_id, cam.params, T, xyz, point_bins)
     assert parallel_regions(k._joint_hist_hard_parallel, *common, padded, 64, 48, 8, 8) == 1
-    smooth = (*common, image_bins, 8, 8, k.N_CHUNKS, True)
+    smooth = (*common, image_bins, 8, 8, k.N_CHUNKS, True, 0, 1.0)
     assert parallel_regions(k._joint_hist_smooth_parallel, *smooth) == 1
 
 
@@ -99,7 +99,18 @@ def test_smooth_histogram_matches_reference(model, rng):
     T = se3_exp(np.array([0.01, -0.02, 0.03, 0.01, 0.02, -0.01]))
     expected = ref.joint_histogram_smooth(cam, T, pts, point_bins, image_bins, 8)
     hist, _, count = k._joint_hist_smooth(
-        cam.model_id, cam.params, T, pts.T.copy(), point_bins, image_bins, 8, 8, k.N_CHUNKS, False
+        cam.model_id,
+        cam.params,
+        T,
+        pts.T.copy(),
+        point_bins,
+        image_bins,
+        8,
+        8,
+        k.N_CHUNKS,
+        False,
+        0,
+        1.0,
     )
     assert_allclose(hist, expected, **TOL["kernel_vs_reference"])
     assert_allclose(hist.sum(), count, rtol=1e-12)  # B-spline weights are a partition of unity
@@ -136,6 +147,8 @@ def test_smooth_derivative_matches_reference(model, image_kind, rng):
             8,
             k.N_CHUNKS,
             True,
+            0,
+            1.0,
         )
         assert_allclose(hist, expected, **TOL["kernel_vs_reference"])
         scale = np.abs(expected_d).max()

@@ -50,7 +50,7 @@ def test_stacked_histograms_are_each_groups_own(model, rng):
         kernel = k._joint_hist_smooth_parallel if parallel else k._joint_hist_smooth
         smooth, dsmooth, count = kernel(
             cam.model_id, cam.params, T, xyz, rows, image_bins, bins, n_groups * bins,
-            k.N_CHUNKS, True,
+            k.N_CHUNKS, True, 0, 1.0,
         )  # fmt: skip
         for g in range(n_groups):
             sel = groups == g
@@ -78,7 +78,7 @@ def test_grouped_kernels_are_one_parallel_region(rng):
     padded = k.padded_image_bins(image_bins, 8)
     common = (cam.model_id, cam.params, np.eye(4), xyz, rows)
     assert parallel_regions(k._joint_hist_hard_parallel, *common, padded, 64, 48, 8, 32) == 1
-    smooth = (*common, image_bins, 8, 32, k.N_CHUNKS, True)
+    smooth = (*common, image_bins, 8, 32, k.N_CHUNKS, True, 0, 1.0)
     assert parallel_regions(k._joint_hist_smooth_parallel, *smooth) == 1
 
 

@@ -263,6 +263,11 @@ REFINE = (
     Option("--trust-rotation", "refine.trust_rotation_deg",
            "trust region of the whole run: the rotation stays within DEG degrees of the "
            "start's", "DEG"),
+    Option("--refine-intrinsics", "refine.intrinsics",
+           "refine the camera's focal length (focal), or focal length and principal point "
+           "(focal,center), with the extrinsic over every pair; needs 3 pairs or more at "
+           "several depths, and keeps the given camera when the frames cannot fix them "
+           "(the report says which)", "WHAT"),
 )  # fmt: skip
 
 ASSESS = (
@@ -320,7 +325,7 @@ def _choices(option: Option):
     if option.choices is not None:
         return option.choices
     from nbcalib.matching.config import MATCHER_CHOICES, NORMALIZATIONS, ROTATIONS
-    from nbcalib.registration.config import COSTS, OPTIMIZERS
+    from nbcalib.registration.config import COSTS, INTRINSICS_MODES, OPTIMIZERS
 
     known = {
         "matching.matcher": MATCHER_CHOICES,
@@ -330,6 +335,7 @@ def _choices(option: Option):
         "matching.rotate_lidar": ROTATIONS,
         "refine.optimizer": OPTIMIZERS,
         "refine.cost": tuple(COSTS),
+        "refine.intrinsics": tuple(INTRINSICS_MODES),
     }
     return known.get(option.setting)
 

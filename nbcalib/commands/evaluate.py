@@ -94,13 +94,16 @@ def run(args: argparse.Namespace) -> int:
     if not (workdir / "calib.json").is_file():  # before the ground truth: the first thing missing
         raise InputError("no calib.json: run 'nbcalib preprocess' first", workdir / "calib.json")
     stage, errors = _evaluate(workdir, read_ground_truth(args.ground_truth), args)
-    print(json.dumps({**errors, "stage": stage, **_intrinsics_errors(workdir, args.ground_truth)}))
+    intrinsics = _intrinsics_errors(workdir, args.ground_truth, stage)
+    print(json.dumps({**errors, "stage": stage, **intrinsics}))
     return 0
 
 
-def _intrinsics_errors(workdir: Path, ground_truth) -> dict:
-    """The work directory's camera against the lab's rendering camera (``synth --given-*``).
+def _intrinsics_errors(workdir: Path, ground_truth, stage: str) -> dict:
+    """The camera of ``stage``'s result against the lab's rendering camera (``synth --given-*``).
 
+    The refined camera when fine registration refined the intrinsics, else the one given
+    (:meth:`~nbcalib.io.calib_json.CalibFile.result_camera`).
     ``focal_error_percent`` (the mean of ``fx, fy`` against the truth's) and
     ``center_error_px`` (the principal point's distance); nothing for other ground truths.
     """
@@ -112,7 +115,7 @@ def _intrinsics_errors(workdir: Path, ground_truth) -> dict:
     true = read_ground_truth_camera(ground_truth)
     if true is None:
         return {}
-    camera = read_calib_json(workdir / "calib.json").camera_model()
+    camera = read_calib_json(workdir / "calib.json").result_camera(stage)
     if "equirectangular" in (camera.model, true.model):  # intrinsics = image size: no focal
         raise InputError(
             f"the camera is {camera.model}, the ground truth's {true.model}: no focal length "

@@ -213,6 +213,26 @@ class CalibFile:
         except ValueError as exc:
             raise InputError(f"camera: {exc}", self.path) from None
 
+    def result_camera(self, stage: str = FINAL_STAGE) -> CameraModel:
+        """The camera that goes with the result of ``stage``.
+
+        Fine registration's result goes with the camera it refined (``refine.intrinsics``,
+        recorded under ``nbcalib.calibration.intrinsics.camera`` in the ``camera`` entry's
+        layout plus the image size) when the frames fixed it; every other result, and every
+        job that did not refine, with :meth:`camera_model`, the camera given.
+        """
+        from nbcalib.camera import CameraModel
+
+        info = self.record.calibration
+        entry = None if info is None else info.figures.get("intrinsics")
+        if stage != FINAL_STAGE or not isinstance(entry, dict) or not entry.get("refined"):
+            return self.camera_model()
+        try:
+            return CameraModel.from_dict(entry["camera"])
+        except (KeyError, TypeError, ValueError) as exc:
+            message = f"invalid nbcalib.calibration.intrinsics.camera: {exc}"
+            raise InputError(message, self.path) from None
+
     def set_camera(self, camera: CameraModel) -> None:
         """Store ``camera`` in the reference's layout and record its size and model name.
 

@@ -462,7 +462,7 @@ def export_result(
     if "urdf" in formats:
         texts["lidar_camera.urdf"] = urdf_text(T_lidar_camera, **frames)
     if "opencv" in formats:
-        camera = calib.camera_model()
+        camera = calib.result_camera(key)
         texts["camera_lidar_opencv.yaml"] = opencv_yaml_text(camera, T_camera_lidar, stage=key)
     return _write_texts(workdir, out_dir, texts)
 
@@ -634,7 +634,7 @@ def export_rig(
         children.append((name, pose_from_xyz_quat(calib.results[key])))
         if "opencv" in formats:
             texts[f"{name}/camera_lidar_opencv.yaml"] = opencv_yaml_text(
-                calib.camera_model(), calib.get_T_camera_lidar(key), stage=key
+                calib.result_camera(key), calib.get_T_camera_lidar(key), stage=key
             )
     key = keys.pop() if len(keys) == 1 else "/".join(sorted(keys))
     if "tf2" in formats:

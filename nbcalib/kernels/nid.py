@@ -224,6 +224,8 @@ def _smooth_chunk(
     hist,
     dhist,
     want_grad,
+    n_intr,
+    center_step,
 ):
     """One chunk of :func:`_joint_hist_smooth_impl`: points ``[lo, hi)`` into its private rows.
 
@@ -234,11 +236,12 @@ def _smooth_chunk(
     on a first run; 2.5 s calling it; docs/BENCHMARKS.md 7).
     """
     height, width = image_bins.shape
+    n_grad = 6 + n_intr
     for a in range(base, base + span):
         for b in range(bins):
             hist[a, b] = 0.0
             if want_grad:
-                for k in range(6):
+                for k in range(n_grad):
                     dhist[a, b, k] = 0.0
     wu = np.empty(4)
     wv = np.empty(4)
@@ -307,13 +310,37 @@ def _smooth_chunk(
                     gv = wu[ju] * dv[jv]
                     for k in range(6):
                         dhist[a, b, k] += gu * m[0, k] + gv * m[1, k]
+                    if n_intr > 0:  # u = fx e^lambda mx + cx: du/dlambda = u - cx
+                        dhist[a, b, 6] += gu * (u - params[2]) + gv * (v - params[3])
+                    if n_intr > 1:  # the principal point, in full-resolution pixels
+                        dhist[a, b, 7] += gu * center_step
+                        dhist[a, b, 8] += gv * center_step
     return count
 
 
 def _joint_hist_smooth_impl(
-    model_id, params, T, xyz, point_bins, image_bins, bins, rows, n_chunks, want_grad
+    model_id,
+    params,
+    T,
+    xyz,
+    point_bins,
+    image_bins,
+    bins,
+    rows,
+    n_chunks,
+    want_grad,
+    n_intr,
+    center_step,
 ):
-    """B-spline joint histogram (rows x bins), its derivative (rows x bins x 6) and the count.
+    """B-spline joint histogram (rows x bins), its derivative (rows x bins x 6 + n_intr), count.
+
+    The derivative's first six columns are with respect to the pose (``delta = [v, omega]``);
+    ``n_intr`` more (0, 1 or 3) with respect to the camera's intrinsics (issue 47): column 6 to
+    ``lambda``, the log of a common scale of ``fx`` and ``fy`` (``du/dlambda = u - cx``, exact
+    for every model with a focal length, :meth:`nbcalib.camera.CameraModel.
+    intrinsics_jacobian`); columns 7 and 8 to ``cx`` and ``cy`` in pixels of the full
+    resolution, of which one moves a pixel of this pyramid level by ``center_step``
+    (``2^-level``).
 
     ``point_bins`` holds each point's histogram row in ``[0, rows)``: its LiDAR bin (``rows =
     bins``), or ``group * bins + LiDAR bin`` for ``rows / bins`` stacked histograms of groups
@@ -338,8 +365,9 @@ def _joint_hist_smooth_impl(
     total_rows = offset[n_chunks]
     # per-chunk histograms in flat buffers, zeroed by their own chunk: np.zeros here would be a
     # parallel loop of its own (see _joint_hist_hard_impl)
+    n_grad = 6 + n_intr
     hist = np.empty((total_rows, bins))
-    dhist = np.empty((total_rows if want_grad else 1, bins, 6))
+    dhist = np.empty((total_rows if want_grad else 1, bins, n_grad))
     counts = np.empty(n_chunks, dtype=np.int64)
     for c in prange(n_chunks):
         lo, hi = _chunk_bounds(n, n_chunks, c)
@@ -359,15 +387,17 @@ def _joint_hist_smooth_impl(
             hist,
             dhist,
             want_grad,
+            n_intr,
+            center_step,
         )
     # the chunks' parts summed in chunk order (the same sums, in the same order, for every
     # number of threads)
     out = np.empty((rows, bins))
-    dout = np.empty((rows, bins, 6))
+    dout = np.empty((rows, bins, n_grad))
     for a in range(rows):
         for b in range(bins):
             out[a, b] = 0.0
-            for k in range(6):
+            for k in range(n_grad):
                 dout[a, b, k] = 0.0
     for c in range(n_chunks):
         for a in range(span[c]):
@@ -376,7 +406,7 @@ def _joint_hist_smooth_impl(
             for b in range(bins):
                 out[dst, b] += hist[src, b]
                 if want_grad:
-                    for k in range(6):
+                    for k in range(n_grad):
                         dout[dst, b, k] += dhist[src, b, k]
     n_in = 0
     for c in range(n_chunks):
@@ -396,12 +426,14 @@ def _nid_from_hist(hist, dhist, want_grad):
     entropies of the normalised histograms (empty cells contribute 0). The gradient is
     ``sum_ab dNID/dp_ab * dp_ab/d delta`` with ``dhist`` the derivative of the unnormalised
     histogram; the normalisation (number of points in the image) is held fixed. Returns
-    ``(nid, grad (6,))``; NID is 1 (no shared information) when the histogram is empty or has a
+    ``(nid, grad (K,))``, ``K = dhist.shape[2]`` (6 pose columns and any intrinsics'); NID
+    is 1 (no shared information) when the histogram is empty or has a
     single occupied cell.
     """
     bins_l, bins_i = hist.shape
     total = hist.sum()
-    grad = np.zeros(6)
+    n_grad = dhist.shape[2]
+    grad = np.zeros(n_grad)
     if total <= 0.0:
         return 1.0, grad
     row = np.zeros(bins_l)
@@ -442,7 +474,7 @@ def _nid_from_hist(hist, dhist, want_grad):
                 dhi = -(math.log(col[b] / total) + 1.0)
                 dhl = -la
                 coef = ((2.0 * dhj - dhl - dhi) * h_joint - s * dhj) / (h_joint * h_joint)
-                for k in range(6):
+                for k in range(n_grad):
                     grad[k] += coef * dhist[a, b, k] / total
     return nid, grad
 
@@ -465,21 +497,22 @@ def _quantise(values, bins):
 def _grouped_nid(hist, dhist, bins, weights, want_grad):
     """Weighted sum of the NIDs of ``weights.size`` stacked histograms, and its gradient.
 
-    ``hist`` (groups * bins, bins) and ``dhist`` (groups * bins, bins, 6) are the stacked
+    ``hist`` (groups * bins, bins) and ``dhist`` (groups * bins, bins, K) are the stacked
     histograms of :func:`_joint_hist_smooth_impl` (``dhist`` may have one row when
     ``want_grad`` is False); group ``g`` is rows ``[g * bins, (g + 1) * bins)``, its NID that of
     :func:`_nid_from_hist`.
     """
     value = 0.0
-    grad = np.zeros(6)
-    empty = np.zeros((bins, bins, 6))
+    n_grad = dhist.shape[2]
+    grad = np.zeros(n_grad)
+    empty = np.zeros((bins, bins, n_grad))
     for g in range(weights.size):
         h = hist[g * bins : (g + 1) * bins]
         d = dhist[g * bins : (g + 1) * bins] if want_grad else empty
         v, gg = _nid_from_hist(h, d, want_grad)
         value += weights[g] * v
         if want_grad:
-            for k in range(6):
+            for k in range(n_grad):
                 grad[k] += weights[g] * gg[k]
     return value, grad
 
@@ -493,15 +526,16 @@ def _each_group_nid(hist, dhist, bins, n_groups, want_grad):
     :func:`_nid_from_hist`.
     """
     values = np.empty(n_groups)
-    grads = np.zeros((n_groups, 6))
-    empty = np.zeros((bins, bins, 6))
+    n_grad = dhist.shape[2]
+    grads = np.zeros((n_groups, n_grad))
+    empty = np.zeros((bins, bins, n_grad))
     for g in range(n_groups):
         h = hist[g * bins : (g + 1) * bins]
         d = dhist[g * bins : (g + 1) * bins] if want_grad else empty
         v, gg = _nid_from_hist(h, d, want_grad)
         values[g] = v
         if want_grad:
-            for k in range(6):
+            for k in range(n_grad):
                 grads[g, k] = gg[k]
     return values, grads
 

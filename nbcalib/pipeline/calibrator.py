@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import logging
 import time
-from dataclasses import asdict
+from dataclasses import asdict, replace
 
 import numpy as np
 
@@ -308,6 +308,10 @@ class Calibrator(GuessSteps, JobRecords):
                 trust_region=(cfg.trust_translation, cfg.trust_rotation_deg),
                 at_trust_boundary=result.at_trust_boundary,
             )
+            if result.intrinsics is not None:
+                calib.record.calibration.figures["intrinsics"] = result.intrinsics.to_record()
+        if result.intrinsics is not None:
+            log.info("    %s", result.intrinsics.summary())
         if result.at_trust_boundary:
             self._refine_failed(calib, start, result)
         if calib is not None:
@@ -391,6 +395,9 @@ class Calibrator(GuessSteps, JobRecords):
 
         T, start = self._result_pose(), self._report_start()
         pairs = self._registration_pairs()
+        camera = self._result_camera()
+        if pairs and camera != pairs[0].camera:  # judged with the camera it refined
+            pairs = [replace(p, camera=camera) for p in pairs]
         converged = None if self.refinement is None else self.refinement.converged
         calib = self._calib()
         if converged is None and calib is not None:
@@ -442,7 +449,7 @@ class Calibrator(GuessSteps, JobRecords):
             initial_guess=self.guess,
             pairs=list(self.pairs or []),
             refinement=self.refinement,
-            camera=self.camera,
+            camera=self._result_camera(),
             quality=self.quality,
             matches=list(self.matches.values()),
             virtual_camera=self.virtual,
@@ -471,6 +478,15 @@ class Calibrator(GuessSteps, JobRecords):
     def _has(self, stage: str) -> bool:
         calib = self._calib()
         return calib is not None and calib.has_result(stage)
+
+    def _result_camera(self):
+        """The camera the result goes with: the refined one, when the job refined it."""
+        if self.refinement is not None and self.refinement.camera is not None:
+            return self.refinement.camera
+        calib = self._calib()
+        if calib is not None and self._has(FINAL_STAGE):
+            return calib.result_camera()
+        return self._camera()
 
     def _camera(self):
         if self.camera is None:

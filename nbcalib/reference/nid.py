@@ -83,23 +83,40 @@ def bspline_derivatives(s: float) -> np.ndarray:
     return np.array([-3 * (1 - s) ** 2, 9 * s**2 - 12 * s, -9 * s**2 + 6 * s + 3, 3 * s**2]) / 6
 
 
-def joint_histogram_smooth_derivative(camera, T, points, point_bins, image_bins, bins):
-    """Derivative (bins, bins, 6) of :func:`joint_histogram_smooth` w.r.t. ``T <- exp(d) T``.
+def joint_histogram_smooth_derivative(
+    camera, T, points, point_bins, image_bins, bins, n_intr=0, center_step=1.0
+):
+    """Derivative (bins, bins, 6 + n_intr) of :func:`joint_histogram_smooth`.
 
     Each in-image point moves its pixel by ``d(u, v)/d delta = J_proj [I, -[p_c]x]`` (left
-    perturbation, ``delta = [v, omega]``), and each of its 16 weights ``wu[i] wv[j]`` changes by
-    ``du[i] wv[j] du/d delta + wu[i] dv[j] dv/d delta``.
+    perturbation ``T <- exp(delta) T``, ``delta = [v, omega]``), and each of its 16 weights
+    ``wu[i] wv[j]`` changes by ``du[i] wv[j] du/d delta + wu[i] dv[j] dv/d delta``.
+
+    ``n_intr`` (0, 1 or 3) more columns with respect to the intrinsics, from the camera's own
+    :meth:`~nbcalib.camera.CameraModel.intrinsics_jacobian` ``K = d(u, v)/d(fx, fy, cx, cy)``:
+    ``lambda`` scaling both focal lengths by ``exp(lambda)`` moves the pixel by ``fx K[:, 0] +
+    fy K[:, 1]``; ``cx`` and ``cy``, in pixels of a resolution ``1 / center_step`` times
+    ``camera``'s, by ``center_step K[:, 2]`` and ``center_step K[:, 3]``.
     """
-    dhist = np.zeros((bins, bins, 6))
+    dhist = np.zeros((bins, bins, 6 + n_intr))
     height, width = image_bins.shape
     p_camera = _camera_points(T, points)
     uv, jac, valid = camera.project_jacobian(p_camera)
     inside = camera.in_image(uv) & valid
-    for (u, v), J, p, ok, a in zip(uv, jac, p_camera, inside, point_bins):
+    if n_intr:
+        _, kjac, _ = camera.intrinsics_jacobian(p_camera)
+        fx, fy = camera.intrinsics[:2]
+        columns = [fx * kjac[:, :, 0] + fy * kjac[:, :, 1]]
+        if n_intr == 3:
+            columns += [center_step * kjac[:, :, 2], center_step * kjac[:, :, 3]]
+        dintr = np.stack(columns, axis=2)  # (N, 2, n_intr)
+    else:
+        dintr = np.zeros((len(p_camera), 2, 0))
+    for (u, v), J, p, ok, a, K in zip(uv, jac, p_camera, inside, point_bins, dintr):
         if not ok:
             continue
         hat = np.array([[0, -p[2], p[1]], [p[2], 0, -p[0]], [-p[1], p[0], 0]])
-        duv = J @ np.hstack([np.eye(3), -hat])  # (2, 6)
+        duv = np.hstack([J @ np.hstack([np.eye(3), -hat]), K])  # (2, 6 + n_intr)
         ku, kv = math.floor(u), math.floor(v)
         wu, wv = bspline_weights(u - ku), bspline_weights(v - kv)
         du, dv = bspline_derivatives(u - ku), bspline_derivatives(v - kv)

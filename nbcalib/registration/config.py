@@ -11,7 +11,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-__all__ = ["COSTS", "OPTIMIZERS", "RENAMED", "RefineConfig"]
+__all__ = ["COSTS", "INTRINSICS_MODES", "OPTIMIZERS", "RENAMED", "RefineConfig"]
 
 #: The intensity terms by name (:attr:`RefineConfig.cost`), each a module of
 #: :mod:`nbcalib.registration.costs` whose ``terms(view, config)`` returns a list of
@@ -21,6 +21,9 @@ COSTS = {
     "regional": "nbcalib.registration.costs.regional",
     "nid": "nbcalib.registration.costs.nid",
 }
+
+#: Values of :attr:`RefineConfig.intrinsics` and how many intrinsics each refines.
+INTRINSICS_MODES = {"focal": 1, "focal,center": 3}
 
 #: Values of :attr:`RefineConfig.optimizer`.
 OPTIMIZERS = ("hybrid", "lbfgs", "nelder_mead")
@@ -138,6 +141,18 @@ class RefineConfig:
         Fewer LiDAR points than this in the images at a pose being refined is refused (a user
         error: the start looks away from the cloud, or the camera does not fit the images):
         a joint histogram of 16 x 16 bins needs a few points per cell.
+    intrinsics : {None, "focal", "focal,center"}
+        Refine the camera's focal length (and principal point) with the extrinsic over every
+        pair, after the pose alone (:mod:`nbcalib.registration.intrinsics`; None, the
+        default: the intrinsics are given). Needs the smooth NID (optimiser ``hybrid`` or
+        ``lbfgs``) and at least three pairs.
+    intrinsics_focal_range, intrinsics_center_range : float
+        How far the refinement may move them: the focal length by this fraction (0.05) and the
+        principal point by this many pixels (25).
+    intrinsics_max_focal_bound, intrinsics_max_center_bound : float
+        The refined intrinsics are kept only when the frames determine them this well (95 %
+        half-widths: 0.5 % of focal length, 2 pixels); otherwise the given camera and the pose
+        found with it are the result, and the report says why.
     """
 
     optimizer: str = "hybrid"
@@ -170,6 +185,11 @@ class RefineConfig:
     min_sampled_points: int = 50_000
     job_points: int | None = 1_000_000
     min_visible_points: int = 100
+    intrinsics: str | None = None
+    intrinsics_focal_range: float = 0.05
+    intrinsics_center_range: float = 25.0
+    intrinsics_max_focal_bound: float = 0.005
+    intrinsics_max_center_bound: float = 2.0
 
     def __post_init__(self):
         if self.optimizer not in OPTIMIZERS:
@@ -214,5 +234,24 @@ class RefineConfig:
             raise ValueError(f"region_points must be >= 1, got {self.region_points}")
         if self.bins < 2:
             raise ValueError(f"bins must be >= 2, got {self.bins}")
+        if self.intrinsics is not None:
+            if self.intrinsics not in INTRINSICS_MODES:
+                raise ValueError(
+                    f"intrinsics must be one of {', '.join(INTRINSICS_MODES)} or None, "
+                    f"got {self.intrinsics!r}"
+                )
+            if self.optimizer == "nelder_mead":
+                raise ValueError(
+                    "intrinsics are refined with the smooth NID's gradient: optimizer hybrid or "
+                    "lbfgs, not nelder_mead"
+                )
+        for name in (
+            "intrinsics_focal_range",
+            "intrinsics_center_range",
+            "intrinsics_max_focal_bound",
+            "intrinsics_max_center_bound",
+        ):
+            if not getattr(self, name) > 0:
+                raise ValueError(f"{name} must be > 0")
         if self.min_pyramid_size < 16:
             raise ValueError(f"min_pyramid_size must be >= 16, got {self.min_pyramid_size}")

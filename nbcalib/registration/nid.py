@@ -27,6 +27,7 @@ Example
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 from dataclasses import dataclass
 
@@ -60,9 +61,38 @@ def _image_to_unit(image) -> np.ndarray:
     return img
 
 
+def offset_params(camera: CameraModel, intrinsics, level: int = 0):
+    """The kernels' camera parameters with an intrinsics offset, and its size.
+
+    ``intrinsics`` (issue 47; None or empty: the camera as it is): ``[lambda]`` scales ``fx`` and
+    ``fy`` by ``exp(lambda)``; ``[lambda, dcx, dcy]`` also moves the principal point by ``dcx,
+    dcy`` pixels of the full resolution, of which ``camera``, at pyramid ``level``, has
+    ``2^-level``. Returns ``(params, n_intr, center_step)`` for the smooth kernel, whose
+    derivative then has ``6 + n_intr`` columns (:func:`nbcalib.kernels.nid.
+    _joint_hist_smooth_impl`).
+    """
+    center_step = 2.0**-level
+    if intrinsics is None or len(intrinsics) == 0:
+        return camera.params, 0, center_step
+    offset = np.asarray(intrinsics, dtype=np.float64).ravel()
+    if offset.size not in (1, 3) or not np.all(np.isfinite(offset)):
+        raise ValueError(f"an intrinsics offset has 1 or 3 finite values, got {offset.tolist()}")
+    if camera.model == "equirectangular":
+        raise ValueError("an equirectangular camera has no focal length or principal point")
+    params = camera.params.copy()
+    params[0:2] *= math.exp(offset[0])
+    if offset.size == 3:
+        params[2:4] += offset[1:] * center_step
+    return params, offset.size, center_step
+
+
 @dataclass(frozen=True)
 class NIDEvaluation:
-    """One evaluation: the NID value, its gradient (or None) and how many points were in view."""
+    """One evaluation: the NID value, its gradient (or None) and how many points were in view.
+
+    The gradient has six entries (the pose's ``delta = [v, omega]``), and one or three more when
+    the evaluation was asked with an intrinsics offset (:func:`offset_params`).
+    """
 
     value: float
     grad: np.ndarray | None
@@ -89,6 +119,9 @@ class NIDCost:
         B-spline smoothed with exact gradient, or nearest-pixel (see module docstring).
     parallel : bool, optional
         Use the multithreaded kernel (identical results; faster for large clouds).
+    level : int, optional
+        The pyramid level ``camera`` and ``image`` belong to (0: full resolution): an
+        intrinsics offset's principal point is in pixels of the full resolution.
     """
 
     def __init__(
@@ -101,6 +134,7 @@ class NIDCost:
         bins: int = 16,
         form: str = "smooth",
         parallel: bool = True,
+        level: int = 0,
     ):
         if form not in ("smooth", "hard"):
             raise ValueError(f"form must be 'smooth' or 'hard', got {form!r}")
@@ -118,6 +152,7 @@ class NIDCost:
             raise ValueError(f"{inten.shape[0]} intensities for {pts.shape[0]} points")
         finite = np.isfinite(pts).all(axis=1) & np.isfinite(inten)
         self.camera = camera
+        self.level = int(level)
         self.bins = int(bins)
         self.form = form
         self.parallel = bool(parallel)
@@ -135,18 +170,23 @@ class NIDCost:
     def __len__(self) -> int:
         return self.xyz.shape[1]
 
-    def evaluate(self, T_camera_lidar, *, grad: bool = False) -> NIDEvaluation:
-        """NID at ``T_camera_lidar`` (4 x 4), with the gradient if ``grad`` (smooth form only)."""
+    def evaluate(self, T_camera_lidar, *, grad: bool = False, intrinsics=None) -> NIDEvaluation:
+        """NID at ``T_camera_lidar`` (4 x 4), with the gradient if ``grad`` (smooth form only).
+
+        ``intrinsics``: an offset of the camera's intrinsics (:func:`offset_params`); the
+        gradient then has its columns after the pose's six.
+        """
         T = np.ascontiguousarray(T_camera_lidar, dtype=np.float64)
         if T.shape != (4, 4) or not np.all(np.isfinite(T)):
             raise ValueError("T_camera_lidar must be a finite 4 x 4 matrix")
         cam = self.camera
+        params, n_intr, center_step = offset_params(cam, intrinsics, self.level)
         if self.form == "hard":
             if grad:
                 raise ValueError("the hard-binned NID is piecewise constant: it has no gradient")
             hist = _k.joint_hist_hard(
                 cam.model_id,
-                cam.params,
+                params,
                 T,
                 self.xyz,
                 self.point_bins,
@@ -161,7 +201,7 @@ class NIDCost:
         kernel = _k._joint_hist_smooth_parallel if self.parallel else _k._joint_hist_smooth
         hist, dhist, n_in = kernel(
             cam.model_id,
-            cam.params,
+            params,
             T,
             self.xyz,
             self.point_bins,
@@ -170,17 +210,19 @@ class NIDCost:
             self.bins,
             _k.N_CHUNKS,
             grad,
+            n_intr,
+            center_step,
         )
         value, g = _k._nid_from_hist(hist, dhist, grad)
         return NIDEvaluation(float(value), g if grad else None, int(n_in))
 
-    def value(self, T_camera_lidar) -> float:
+    def value(self, T_camera_lidar, intrinsics=None) -> float:
         """NID at ``T_camera_lidar``."""
-        return self.evaluate(T_camera_lidar).value
+        return self.evaluate(T_camera_lidar, intrinsics=intrinsics).value
 
-    def value_and_grad(self, T_camera_lidar) -> tuple[float, np.ndarray]:
+    def value_and_grad(self, T_camera_lidar, intrinsics=None) -> tuple[float, np.ndarray]:
         """NID and its gradient (6,) w.r.t. ``delta = [v, omega]`` in ``exp(delta) @ T``."""
-        ev = self.evaluate(T_camera_lidar, grad=True)
+        ev = self.evaluate(T_camera_lidar, grad=True, intrinsics=intrinsics)
         return ev.value, ev.grad
 
 
@@ -199,6 +241,8 @@ class GroupedNIDCost:
         As :class:`NIDCost`.
     groups : ndarray of shape (N,), int
         Group of each point (any integers; groups are numbered in sorted order).
+    level : int, optional
+        As :class:`NIDCost`.
     """
 
     def __init__(
@@ -212,6 +256,7 @@ class GroupedNIDCost:
         bins: int = 16,
         form: str = "smooth",
         parallel: bool = True,
+        level: int = 0,
     ):
         if form not in ("smooth", "hard"):
             raise ValueError(f"form must be 'smooth' or 'hard', got {form!r}")
@@ -236,6 +281,7 @@ class GroupedNIDCost:
         group_ids = group_ids.ravel()
         order = np.argsort(group_ids, kind="stable")
         self.camera = camera
+        self.level = int(level)
         self.bins = int(bins)
         self.form = form
         self.parallel = bool(parallel)
@@ -257,8 +303,11 @@ class GroupedNIDCost:
     def __len__(self) -> int:
         return self.xyz.shape[1]
 
-    def evaluate(self, T_camera_lidar, *, grad: bool = False) -> NIDEvaluation:
-        """The groups' mean NID at ``T_camera_lidar`` (4 x 4), with the gradient if ``grad``."""
+    def evaluate(self, T_camera_lidar, *, grad: bool = False, intrinsics=None) -> NIDEvaluation:
+        """The groups' mean NID at ``T_camera_lidar`` (4 x 4), with the gradient if ``grad``.
+
+        ``intrinsics``: as :meth:`NIDCost.evaluate`.
+        """
         T = np.ascontiguousarray(T_camera_lidar, dtype=np.float64)
         if T.shape != (4, 4) or not np.all(np.isfinite(T)):
             raise ValueError("T_camera_lidar must be a finite 4 x 4 matrix")
@@ -266,9 +315,10 @@ class GroupedNIDCost:
             cam = self.camera
             if grad:
                 raise ValueError("the hard-binned NID is piecewise constant: it has no gradient")
+            params, _, _ = offset_params(cam, intrinsics, self.level)
             hist = _k.joint_hist_hard(
                 cam.model_id,
-                cam.params,
+                params,
                 T,
                 self.xyz,
                 self.rows,
@@ -282,17 +332,18 @@ class GroupedNIDCost:
                 hist, np.zeros((1, self.bins, 6)), self.bins, self.weights, False
             )
             return NIDEvaluation(float(value), None, int(hist.sum()))
-        hist, dhist, n_in = self._smooth_histograms(T, grad)
+        hist, dhist, n_in = self._smooth_histograms(T, grad, intrinsics)
         value, g = _k._grouped_nid(hist, dhist, self.bins, self.weights, grad)
         return NIDEvaluation(float(value), g if grad else None, int(n_in))
 
-    def _smooth_histograms(self, T: np.ndarray, grad: bool):
+    def _smooth_histograms(self, T: np.ndarray, grad: bool, intrinsics=None):
         """The stacked B-spline joint histograms (and their derivatives if ``grad``) at ``T``."""
         cam = self.camera
+        params, n_intr, center_step = offset_params(cam, intrinsics, self.level)
         kernel = _k._joint_hist_smooth_parallel if self.parallel else _k._joint_hist_smooth
         return kernel(
             cam.model_id,
-            cam.params,
+            params,
             T,
             self.xyz,
             self.rows,
@@ -301,10 +352,12 @@ class GroupedNIDCost:
             self.n_groups * self.bins,
             _k.N_CHUNKS,
             grad,
+            n_intr,
+            center_step,
         )
 
-    def each_group(self, T_camera_lidar) -> tuple[np.ndarray, np.ndarray]:
-        """Each group's own NID (G,) and its gradient (G, 6) at ``T_camera_lidar``, unweighted.
+    def each_group(self, T_camera_lidar, intrinsics=None) -> tuple[np.ndarray, np.ndarray]:
+        """Each group's own NID (G,) and its gradient (G, 6 [+ 1 or 3]) at a pose, unweighted.
 
         The smooth form's terms of :meth:`value_and_grad` before the weights
         (:attr:`weights`) sum them; the quality report's jackknife over regions uses them
@@ -315,16 +368,16 @@ class GroupedNIDCost:
         T = np.ascontiguousarray(T_camera_lidar, dtype=np.float64)
         if T.shape != (4, 4) or not np.all(np.isfinite(T)):
             raise ValueError("T_camera_lidar must be a finite 4 x 4 matrix")
-        hist, dhist, _ = self._smooth_histograms(T, True)
+        hist, dhist, _ = self._smooth_histograms(T, True, intrinsics)
         return _k._each_group_nid(hist, dhist, self.bins, self.n_groups, True)
 
-    def value(self, T_camera_lidar) -> float:
+    def value(self, T_camera_lidar, intrinsics=None) -> float:
         """The groups' mean NID at ``T_camera_lidar``."""
-        return self.evaluate(T_camera_lidar).value
+        return self.evaluate(T_camera_lidar, intrinsics=intrinsics).value
 
-    def value_and_grad(self, T_camera_lidar) -> tuple[float, np.ndarray]:
+    def value_and_grad(self, T_camera_lidar, intrinsics=None) -> tuple[float, np.ndarray]:
         """The groups' mean NID and its gradient (6,) w.r.t. ``delta`` in ``exp(delta) @ T``."""
-        ev = self.evaluate(T_camera_lidar, grad=True)
+        ev = self.evaluate(T_camera_lidar, grad=True, intrinsics=intrinsics)
         return ev.value, ev.grad
 
 
@@ -347,18 +400,21 @@ class MultiNIDCost:
             raise ValueError(f"weights must be {len(self.costs)} finite values >= 0")
         self.weights = w
 
-    def evaluate(self, T_camera_lidar, *, grad: bool = False) -> NIDEvaluation:
-        """Weighted NID sum (and gradient) over the costs."""
-        evs = [c.evaluate(T_camera_lidar, grad=grad) for c in self.costs]
+    def evaluate(self, T_camera_lidar, *, grad: bool = False, intrinsics=None) -> NIDEvaluation:
+        """Weighted NID sum (and gradient) over the costs (``intrinsics``: their offset)."""
+        if intrinsics is None:  # terms that know nothing of intrinsics (a rig's) stay valid
+            evs = [c.evaluate(T_camera_lidar, grad=grad) for c in self.costs]
+        else:
+            evs = [c.evaluate(T_camera_lidar, grad=grad, intrinsics=intrinsics) for c in self.costs]
         value = float(sum(w * e.value for w, e in zip(self.weights, evs)))
         g = np.sum([w * e.grad for w, e in zip(self.weights, evs)], axis=0) if grad else None
         return NIDEvaluation(value, g, sum(e.n_in_image for e in evs))
 
-    def value(self, T_camera_lidar) -> float:
+    def value(self, T_camera_lidar, intrinsics=None) -> float:
         """Weighted NID sum."""
-        return self.evaluate(T_camera_lidar).value
+        return self.evaluate(T_camera_lidar, intrinsics=intrinsics).value
 
-    def value_and_grad(self, T_camera_lidar) -> tuple[float, np.ndarray]:
+    def value_and_grad(self, T_camera_lidar, intrinsics=None) -> tuple[float, np.ndarray]:
         """Weighted NID sum and gradient."""
-        ev = self.evaluate(T_camera_lidar, grad=True)
+        ev = self.evaluate(T_camera_lidar, grad=True, intrinsics=intrinsics)
         return ev.value, ev.grad

@@ -51,6 +51,11 @@ __all__ = [
 #: Units of L-BFGS's chart variables: metres for ``v``, radians for ``omega`` (1 cm, 0.05 deg).
 LBFGS_SCALE = np.array([0.01] * 3 + [math.radians(0.05)] * 3)
 
+#: Units of the intrinsics' chart variables when they are refined with the pose (issue 47): the
+#: log focal scale in 0.1 % (about the pixel shift of a 1 cm forward move of a camera 10 m from
+#: the scene at the image's edge), the principal point in pixels.
+LBFGS_INTRINSICS_SCALE = np.array([1e-3, 1.0, 1.0])
+
 
 @dataclass
 class InnerResult:
@@ -63,6 +68,8 @@ class InnerResult:
     converged: bool
     message: str
     history: list[float] = field(default_factory=list)
+    #: The intrinsics' offset found, when they were refined with the pose (else None).
+    intrinsics: np.ndarray | None = None
 
 
 def se3_left_jacobian(xi: np.ndarray) -> np.ndarray:
@@ -184,6 +191,8 @@ def minimize_lbfgs(
     gtol: float = 1e-10,
     ftol: float = 1e-7,
     trust_region: TrustRegion | None = None,
+    intrinsics=None,
+    intrinsics_bounds=None,
 ) -> InnerResult:
     """Minimise ``cost(T)`` over ``T = exp(delta) @ T0`` with box-bounded L-BFGS.
 
@@ -191,22 +200,54 @@ def minimize_lbfgs(
     ----------
     cost_and_grad : callable
         ``f(T_camera_lidar) -> (value, grad)`` with ``grad`` (6,) the derivative with respect to
-        a left perturbation ``exp(d) @ T`` at ``T`` (as :meth:`NIDCost.value_and_grad`).
+        a left perturbation ``exp(d) @ T`` at ``T`` (as :meth:`NIDCost.value_and_grad`); with
+        ``intrinsics``, ``f(T_camera_lidar, intrinsics) -> (value, grad (6 + n,))``.
     T0 : ndarray of shape (4, 4)
         Start pose (centre of the chart).
     trust_region : TrustRegion, optional
         The region the result must lie in (``T0`` inside it; module docstring).
+    intrinsics : array_like of shape (n,), optional
+        Refine these intrinsics with the pose, from this start (issue 47: ``[lambda]`` or
+        ``[lambda, cx, cy]``, :func:`nbcalib.registration.nid.offset_params`), in a chart
+        scaled by :data:`LBFGS_INTRINSICS_SCALE`; their value found is the result's
+        :attr:`InnerResult.intrinsics`.
+    intrinsics_bounds : sequence of (low, high), optional
+        Bounds of each intrinsic (default none).
     """
     history: list[float] = []
     objective = cost_and_grad
+    theta0 = None if intrinsics is None else np.asarray(intrinsics, dtype=np.float64).ravel()
+    n_intr = 0 if theta0 is None else theta0.size
+    k_intr = LBFGS_INTRINSICS_SCALE[:n_intr]
+    found: dict = {}
+    if n_intr:
+
+        def pose_cost_at(theta):  # the cost of the pose at theta, its gradient kept aside
+            def pose_cost(T):
+                value, g = cost_and_grad(T, theta)
+                found["g_intr"] = np.asarray(g[6:], dtype=np.float64)
+                return value, g[:6]
+
+            return pose_cost
+
     if trust_region is not None:
-        objective = trust_region.penalised_value_and_grad(cost_and_grad)
         max_translation, max_rotation = trust_region.chart_bounds(T0, max_translation, max_rotation)
+        if not n_intr:
+            objective = trust_region.penalised_value_and_grad(cost_and_grad)
 
     scale = LBFGS_SCALE
 
     def f(x):
-        delta = x * scale
+        delta = x[:6] * scale
+        if n_intr:
+            theta = x[6:] * k_intr
+            pose_cost = pose_cost_at(theta)
+            if trust_region is not None:
+                pose_cost = trust_region.penalised_value_and_grad(pose_cost)
+            value, g = pose_cost(se3_exp(delta) @ T0)
+            history.append(value)
+            g_pose = (se3_left_jacobian(delta).T @ g) * scale
+            return value, np.concatenate([g_pose, found["g_intr"] * k_intr])
         value, g = objective(se3_exp(delta) @ T0)
         history.append(value)
         return value, (se3_left_jacobian(delta).T @ g) * scale
@@ -214,21 +255,30 @@ def minimize_lbfgs(
     bounds = [
         (lo / k, hi / k) for (lo, hi), k in zip(_bounds(max_translation, max_rotation), scale)
     ]
+    x0 = np.zeros(6)
+    if n_intr:
+        x0 = np.concatenate([x0, theta0 / k_intr])
+        limits = intrinsics_bounds or [(-np.inf, np.inf)] * n_intr
+        bounds += [(lo / k, hi / k) for (lo, hi), k in zip(limits, k_intr)]
     res = minimize(
         f,
-        np.zeros(6),
+        x0,
         jac=True,
         method="L-BFGS-B",
         bounds=bounds,
         options={"maxiter": max_iterations, "gtol": gtol, "ftol": ftol},
     )
     result = InnerResult(
-        se3_exp(res.x * scale) @ T0,
+        se3_exp(res.x[:6] * scale) @ T0,
         float(res.fun),
         int(res.nit),
         int(res.nfev),
         bool(res.success),
         str(res.message),
         history,
+        None if not n_intr else res.x[6:] * k_intr,
     )
+    if n_intr:
+        theta = result.intrinsics
+        return _in_region(result, trust_region, lambda T: cost_and_grad(T, theta)[0])
     return _in_region(result, trust_region, lambda T: cost_and_grad(T)[0])

@@ -48,7 +48,7 @@ import numpy as np
 
 from nbcalib.errors import InputError
 from nbcalib.progress import Progress
-from nbcalib.registration.config import RefineConfig
+from nbcalib.registration.config import INTRINSICS_MODES, RefineConfig
 from nbcalib.registration.costs import build_cost
 from nbcalib.registration.optimize import InnerResult, minimize_lbfgs, minimize_nelder_mead
 from nbcalib.registration.pair import (
@@ -108,6 +108,14 @@ class RefineResult:
     T_init: np.ndarray | None = None
     trust_translation: float | None = None
     trust_rotation_deg: float | None = None
+    #: With ``refine.intrinsics``: the joint refinement of pose and intrinsics
+    #: (:class:`~nbcalib.registration.intrinsics.IntrinsicsRefinement`); None otherwise.
+    intrinsics: object = None
+
+    @property
+    def camera(self):
+        """The camera the result goes with when the intrinsics were refined (else None)."""
+        return None if self.intrinsics is None else self.intrinsics.camera
 
     @property
     def moved(self) -> tuple[float, float]:
@@ -179,6 +187,10 @@ def refine(
     config = config or RefineConfig()
     if not pairs:
         raise ValueError("refine needs at least one LiDAR-camera pair")
+    if config.intrinsics is not None:
+        from nbcalib.registration.intrinsics import check_pairs
+
+        check_pairs(pairs)  # before any work
     T = validate_T(np.asarray(T_camera_lidar_init, dtype=np.float64), "T_camera_lidar_init")
     result = RefineResult(
         T.copy(),
@@ -191,7 +203,7 @@ def refine(
         # Nelder-Mead on the hard NID over the pyramid finds the basin; L-BFGS on the smooth
         # NID at full resolution then polishes (docs/BENCHMARKS.md, "hybrid optimiser")
         stages = [
-            replace(config, optimizer="nelder_mead"),
+            replace(config, optimizer="nelder_mead", intrinsics=None),
             replace(config, optimizer="lbfgs", pyramid_levels=0),
         ]
     else:
@@ -205,7 +217,79 @@ def refine(
 
         for stage in stages:
             _run_levels(pairs, region, stage, result, report)
+        if config.intrinsics is not None:
+            _refine_intrinsics(pairs, region, config, result, report)
     return result
+
+
+def _refine_intrinsics(
+    pairs, region: TrustRegion, config: RefineConfig, result: RefineResult, progress
+) -> None:
+    """Pose and intrinsics together from the pose's result: L-BFGS at full resolution.
+
+    Each outer iteration sees the pairs through the camera at the intrinsics it starts from
+    (hidden points, regions), and minimises over the pose and their offset from there. Then
+    :func:`~nbcalib.registration.intrinsics.identifiability` decides whether the refined
+    intrinsics are kept (:attr:`RefineResult.intrinsics`).
+    """
+    from nbcalib.registration import intrinsics as intr
+
+    given = pairs[0].camera
+    T_pose, nid_pose = result.T_camera_lidar.copy(), result.nid
+    theta = np.zeros(INTRINSICS_MODES[config.intrinsics])
+    stage = replace(config, optimizer="lbfgs", pyramid_levels=0)
+    bounds = intr.intrinsics_bounds(config)
+    max_rot = math.radians(config.max_rotation_deg)
+    T, joint = T_pose, []
+    for _ in range(config.max_outer):
+        moved = [replace(p, camera=intr.refined_camera(given, theta)) for p in pairs]
+        step, T_new, theta_new = _outer_iteration(
+            moved, T, stage, 0, max_rot, region, intrinsics=(theta, bounds)
+        )
+        step.optimizer = f"lbfgs+{config.intrinsics}"
+        shift = np.abs(theta_new - theta)
+        T, theta = T_new, theta_new
+        joint.append(step)
+        progress(len(result.history) + len(joint) - 1, step)
+        if (
+            step.translation_change < config.converge_translation
+            and step.rotation_change_deg < config.converge_rotation_deg
+            and shift[0] < 1e-4
+            and (shift.size == 1 or shift[1:].max() < 0.05)
+        ):
+            break
+    found = intr.identifiability(pairs, T, theta, config)
+    reasons = []
+    if found["focal_bound_percent"] > 100 * config.intrinsics_max_focal_bound:
+        reasons.append(
+            f"the frames fix the focal length only to +-{found['focal_bound_percent']:.2f} % "
+            f"(needed: {100 * config.intrinsics_max_focal_bound:g} %)"
+        )
+    if theta.size == 3 and found["center_bound_px"] > config.intrinsics_max_center_bound:
+        reasons.append(
+            f"the principal point only to +-{found['center_bound_px']:.1f} px "
+            f"(needed: {config.intrinsics_max_center_bound:g} px)"
+        )
+    refined = not reasons
+    camera = intr.refined_camera(given, theta)
+    result.intrinsics = intr.IntrinsicsRefinement(
+        mode=config.intrinsics,
+        theta=theta,
+        given=given,
+        camera=camera if refined else given,
+        refined=refined,
+        reason="; ".join(reasons),
+        correlation=found["correlation"],
+        focal_bound_percent=found["focal_bound_percent"],
+        center_bound_px=found["center_bound_px"],
+        T_pose_only=T_pose,
+        T_joint=T.copy(),
+        nid_pose_only=nid_pose,
+        nid_joint=joint[-1].nid,
+    )
+    if refined:
+        result.history.extend(joint)
+        result.T_camera_lidar = T.copy()
 
 
 def _run_levels(
@@ -250,11 +334,20 @@ def _usable_levels(pairs: Sequence[RegistrationPair], config: RefineConfig) -> i
 
 
 def _outer_iteration(
-    pairs, T, config: RefineConfig, level: int, max_rot: float, region: TrustRegion | None = None
+    pairs,
+    T,
+    config: RefineConfig,
+    level: int,
+    max_rot: float,
+    region: TrustRegion | None = None,
+    *,
+    intrinsics=None,
 ):
     """Hidden-point removal at ``T``, then one inner minimisation at pyramid ``level``.
 
     The minimisation returns a pose inside ``region`` (the run's trust region) when given.
+    ``intrinsics``: ``(theta, bounds)`` to refine the intrinsics with the pose by L-BFGS, the
+    pairs' camera being at ``theta`` already; then returns ``(step, T, theta)``.
     """
     t0 = time.perf_counter()
     cost, counts = build_cost(pairs, T, config, level=level)
@@ -266,7 +359,20 @@ def _outer_iteration(
         )
     start_value = cost.value(T)
     inner: InnerResult
-    if config.optimizer == "lbfgs":
+    if intrinsics is not None:
+        theta0, bounds = intrinsics
+        inner = minimize_lbfgs(
+            lambda T_, theta: cost.value_and_grad(T_, intrinsics=theta - theta0),
+            T,
+            max_translation=config.max_translation,
+            max_rotation=max_rot,
+            max_iterations=config.max_inner,
+            ftol=config.lbfgs_ftol,
+            trust_region=region,
+            intrinsics=theta0,
+            intrinsics_bounds=bounds,
+        )
+    elif config.optimizer == "lbfgs":
         inner = minimize_lbfgs(
             cost.value_and_grad,
             T,
@@ -289,8 +395,10 @@ def _outer_iteration(
             trust_region=region,
         )
     T_new = inner.T_camera_lidar
+    theta_new = None if intrinsics is None else inner.intrinsics
     if inner.value > start_value:  # never accept a worse pose
         T_new, inner.value = T, start_value
+        theta_new = None if intrinsics is None else intrinsics[0]
     dt, dr = pose_error(invert_T(T_new), invert_T(T))
     step = OuterIteration(
         nid=inner.value,
@@ -306,4 +414,6 @@ def _outer_iteration(
         optimizer=config.optimizer,
         T_camera_lidar=T_new.copy(),
     )
+    if intrinsics is not None:
+        return step, T_new, theta_new
     return step, T_new

@@ -140,7 +140,9 @@ def write_report(
                     tmp, quality, loaded, pairs, refine_config, T, T_init, step
                 )
             quality.save(tmp / "quality.npz")  # the material to judge it again (rejudge)
-            page = _page(quality, work.path, figures, have_mpl, init_stage)
+            info = work.read_calib().record.calibration
+            refined = None if info is None else info.figures.get("intrinsics")
+            page = _page(quality, work.path, figures, have_mpl, init_stage, refined)
             write_text_atomic(tmp / "index.html", page)  # last: marks the folder complete
             step("index.html")
             _swap_in(tmp, final)
@@ -310,7 +312,51 @@ def _move_html(q: Quality, init_stage) -> str:
     )
 
 
-def _page(q: Quality, workdir: Path, figures: list[Path], have_mpl: bool, init_stage) -> str:
+def _intrinsics_html(entry: dict | None) -> str:
+    """The intrinsics refined with the extrinsic (``refine.intrinsics``), or nothing."""
+    if not isinstance(entry, dict):
+        return ""
+    try:
+        scale = float(entry["focal_scale"])
+        found = (
+            f"focal length x{scale:.4f} ({100 * (scale - 1):+.2f} %, +-"
+            f"{float(entry['focal_bound_percent']):.2f} %)"
+        )
+        if entry.get("mode") == "focal,center":
+            dx, dy = entry["center_shift_px"]
+            found += (
+                f", principal point moved {dx:+.1f}, {dy:+.1f} px (+-"
+                f"{float(entry['center_bound_px']):.1f} px)"
+            )
+        corr = float(entry["correlation_focal_forward"])
+        camera = entry["camera"] if entry.get("refined") else entry["given_camera"]
+        used = ", ".join(f"{float(x):.2f}" for x in camera["intrinsics"])
+    except (KeyError, TypeError, ValueError):
+        return ""
+    if entry.get("refined"):
+        verdict = f"The result goes with the refined camera (intrinsics {used})."
+    else:
+        verdict = (
+            f"The given camera is kept (intrinsics {used}), and the pose found with it: "
+            f"{entry.get('reason', '')}."
+        )
+    return (
+        f"<h2>Intrinsics</h2><p>Refined with the extrinsic over every pair: {found}, at the "
+        f"report's 95 % bounds from leaving each pair out. {html.escape(verdict)}</p>"
+        f"<p>Correlation of focal length and forward translation: {corr:+.2f}. Near +-1 the "
+        "frames cannot tell a longer focal length from a camera further forward (frames at "
+        "one depth, or too few).</p>"
+    )
+
+
+def _page(
+    q: Quality,
+    workdir: Path,
+    figures: list[Path],
+    have_mpl: bool,
+    init_stage,
+    intrinsics: dict | None = None,
+) -> str:
     from nbcalib.io.calib_json import values_from_T_camera_lidar
 
     xyzq = values_from_T_camera_lidar(q.T_camera_lidar)
@@ -372,7 +418,7 @@ def _page(q: Quality, workdir: Path, figures: list[Path], have_mpl: bool, init_s
         f"<h1>Calibration report: {html.escape(str(workdir))}</h1>"
         "<p>T_lidar_camera (x, y, z in m; qx, qy, qz, qw): "
         f"<code>[{', '.join(f'{v:.6f}' for v in xyzq)}]</code></p>"
-        f"{_summary_html(q)}"
+        f"{_summary_html(q)}{_intrinsics_html(intrinsics)}"
         f"<h2>Pairs</h2><p>Summed NID {q.nid:.4f}; optimiser converged: {conv}.</p>{init}"
         "<table><tr><th>pair</th><th>NID</th><th>visible points</th><th>pixels covered</th>"
         f"{offsets_head}</tr>{rows}</table>{spread}"

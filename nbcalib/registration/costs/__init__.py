@@ -172,10 +172,12 @@ class RigTerm:
         self.T_camera_ref = np.asarray(T_camera_ref, dtype=np.float64)
         self._adjoint_T = se3_adjoint(self.T_camera_ref).T
 
-    def evaluate(self, T_camera_lidar, *, grad: bool = False):
+    def evaluate(self, T_camera_lidar, *, grad: bool = False, intrinsics=None):
         """The term at the pair camera's pose (and the gradient in the reference camera's)."""
         from nbcalib.registration.nid import NIDEvaluation
 
+        if intrinsics is not None:
+            raise ValueError("a rig's intrinsics cannot be refined with its extrinsic")
         ev = self.term.evaluate(self.T_camera_ref @ T_camera_lidar, grad=grad)
         g = None if ev.grad is None else self._adjoint_T @ ev.grad
         return NIDEvaluation(ev.value, g, ev.n_in_image)

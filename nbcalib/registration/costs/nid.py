@@ -36,6 +36,7 @@ def terms(view, config) -> list:
             bins=config.bins,
             form=view.form,
             parallel=config.parallel,
+            level=view.level,
         )
         out.append((cost, group.size / keep.size if keep.size else 1.0))
     return out

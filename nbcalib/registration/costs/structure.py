@@ -26,5 +26,6 @@ def terms(view, config) -> list:
         bins=config.bins,
         form=view.form,
         parallel=config.parallel,
+        level=view.level,
     )
     return [(cost, 1.0)]

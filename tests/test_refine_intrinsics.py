@@ -1,0 +1,106 @@
+"""Refining the intrinsics with the extrinsic (issue 47): where the truth is exact, frames at
+several depths give back a focal length that was given wrong, and the pose with it; frames that
+cannot tell them apart keep the given camera; a job that cannot refine is refused in one line."""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from nbcalib.camera import example_camera, offset_intrinsics
+from nbcalib.config import CalibrationConfig
+from nbcalib.errors import InputError
+from nbcalib.registration.pair import RegistrationPair
+from nbcalib.registration.refine import refine
+from nbcalib.transforms import invert_T, pose_error, se3_exp
+
+
+def _texture(p):
+    return 0.5 + 0.25 * np.sin(2.3 * p[..., 0] + 1.1 * p[..., 2]) * np.cos(1.9 * p[..., 1])
+
+
+def _room(camera, rng, back: float, n: int = 25000):
+    """A textured box (back wall at ``back`` m, side walls, floor, ceiling) seen from its
+    middle: the image of the texture at each pixel's first hit, and LiDAR points with it."""
+    planes = [(2, back), (1, 1.5), (1, -2.0), (0, -3.0), (0, 3.0)]
+    h, w = camera.height, camera.width
+    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    rays = camera.unproject(np.column_stack([u.ravel(), v.ravel()]))
+    depth = np.full(len(rays), np.inf)
+    for axis, offset in planes:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = offset / rays[:, axis]
+        depth = np.where((s > 0.1) & (s < depth), s, depth)
+    hit = rays * np.where(np.isfinite(depth), depth, 0.0)[:, None]
+    image = np.where(np.isfinite(depth), _texture(hit), 0.0).reshape(h, w)
+    points = []
+    for axis, offset in planes:
+        p = rng.uniform((-3.0, -2.0, 0.5), (3.0, 1.5, back), (n, 3))
+        p[:, axis] = offset
+        points.append(p)
+    points = np.concatenate(points)
+    return (255 * image).astype(np.uint8), points, _texture(points)
+
+
+def _pairs(true, given, rng, backs=(4.0, 7.0, 12.0)):
+    out = []
+    for k, back in enumerate(backs):
+        image, points, intensities = _room(true, rng, back)
+        out.append(RegistrationPair(given, image, points, intensities, f"room_{k}"))
+    return out
+
+
+def _config(**kw):
+    return replace(CalibrationConfig().refine, pyramid_levels=0, **kw)
+
+
+@pytest.mark.parametrize("model", ["pinhole", "fisheye"])
+def test_a_focal_length_given_wrong_comes_back_with_the_pose(model, rng):
+    true = example_camera(model, 320, 240)
+    given = offset_intrinsics(true, focal_scale=1.02)
+    pairs = _pairs(true, given, rng)
+    start = se3_exp(np.array([0.02, -0.01, 0.03, 0.004, -0.003, 0.002]))
+    result = refine(pairs, start, _config(intrinsics="focal"))
+    found = result.intrinsics
+    assert found.refined, found.summary()
+    assert found.focal_scale == pytest.approx(1 / 1.02, abs=0.002), found.summary()
+    assert result.camera.intrinsics[0] == pytest.approx(true.intrinsics[0], rel=0.002)
+    dt, dr = pose_error(invert_T(result.T_camera_lidar), np.eye(4))
+    dt0, _ = pose_error(invert_T(found.T_pose_only), np.eye(4))
+    assert dt < 0.01 and dr < 0.1, (dt, dr)
+    assert dt < dt0  # the pose found with the wrong focal length had absorbed it
+    assert abs(found.correlation) < 1.0 and 0 < found.focal_bound_percent < 0.5
+    record = found.to_record()
+    assert record["refined"] and record["camera"]["intrinsics"][0] == result.camera.intrinsics[0]
+
+
+def test_frames_at_one_depth_keep_the_given_camera(rng):
+    true = example_camera("pinhole", 320, 240)
+    given = offset_intrinsics(true, focal_scale=1.02)
+    pairs = _pairs(true, given, rng, backs=(12.0, 12.0, 12.0))
+    for p in pairs:  # a flat wall only: depth cannot tell focal length from forward motion
+        far = p.points_lidar[:, 2] >= 12.0 - 1e-9
+        p.points_lidar, p.intensities = p.points_lidar[far], p.intensities[far]
+    result = refine(pairs, np.eye(4), _config(intrinsics="focal"))
+    assert not result.intrinsics.refined
+    assert "focal length" in result.intrinsics.reason
+    assert result.camera is given
+    assert np.array_equal(result.T_camera_lidar, result.intrinsics.T_pose_only)
+
+
+def test_a_job_that_cannot_refine_is_refused_before_any_work(rng):
+    cam = example_camera("pinhole", 160, 120)
+    image, points, intensities = _room(cam, rng, 6.0, n=2000)
+    pair = RegistrationPair(cam, image, points, intensities, "one")
+    with pytest.raises(InputError, match="at least 3 pairs"):
+        refine([pair], np.eye(4), _config(intrinsics="focal"))
+    equi = example_camera("equirectangular", 160, 80)
+    pairs = [RegistrationPair(equi, np.zeros((80, 160), np.uint8), points, intensities)] * 3
+    with pytest.raises(InputError, match="equirectangular"):
+        refine(pairs, np.eye(4), _config(intrinsics="focal"))
+    with pytest.raises(ValueError, match="nelder_mead"):
+        _config(intrinsics="focal", optimizer="nelder_mead")
+    with pytest.raises(ValueError, match="intrinsics must be"):
+        _config(intrinsics="skew")
