@@ -16,8 +16,20 @@ set's frames through ``nbcalib preprocess --frames DIR --camera FILE`` as a user
 the same scan at the set's reference pose: ACFR's fisheye is thought ~1 % off (BENCHMARKS 5.7),
 KITTI's intrinsics exact.
 
+**Refinement** (``--refine focal,center``; issue 47's done-when): per camera model, a lab of
+``--pairs`` pairs rendered with the true camera and given one off by ``--refine-offset`` (focal
+scale and principal point shift; the sign alternates from model to model), preprocessed twice
+as a user would: with the bags' (wrong) ``camera_info``, and with the true camera typed
+(``--camera-model --intrinsics --distortion``). Each is calibrated through
+``nbcalib calibrate WORK --init START --refine-intrinsics MODE``, ``START`` 1 deg / 5 cm from the
+truth (seeded), and judged by ``nbcalib evaluate``: the refined intrinsics' error, the pose's
+error with them, and the pose's error found with the given camera alone (recorded beside the
+refinement in ``calib.json``). With the true camera given, the refinement should hardly move.
+
 Run:  python benchmarks/bench_intrinsics.py [--models pinhole,fisheye] [--offsets 1,1.015,0.985]
       python benchmarks/bench_intrinsics.py --models "" --real acfr,kitti-odometry,kitti-raw
+      python benchmarks/bench_intrinsics.py --refine focal,center --pairs 10 \
+          --models pinhole,plumb_bob,rational_polynomial,fisheye,atan,omnidir
 Prints a Markdown table and one JSON line.
 """
 
@@ -148,6 +160,107 @@ def synthetic_case(model, offset, args, root: Path, config) -> dict:
     return row
 
 
+#: Seed of the refinement's starts (1 deg / 5 cm from the truth).
+START_SEED = 47
+
+
+def _calibrated(work: Path, gt: Path, init: str, mode: str) -> dict:
+    """``nbcalib calibrate --refine-intrinsics MODE`` from ``init``; evaluate's line + record."""
+    from nbcalib.io.calib_json import T_camera_lidar_from_values, read_calib_json
+    from nbcalib.transforms import pose_error
+
+    t0 = time.perf_counter()
+    nbcalib("calibrate", work, f"--init={init}", "--refine-intrinsics", mode, "--force")
+    seconds = time.perf_counter() - t0
+    ev = json.loads(nbcalib("evaluate", work, "--ground-truth", gt).stdout.splitlines()[-1])
+    record = read_calib_json(work / "calib.json").record.calibration.figures["intrinsics"]
+    T_true = read_ground_truth(gt)
+    T_pose = T_camera_lidar_from_values(record["pose_only_T_lidar_camera"])
+    dt, dr = pose_error(invert_T(T_pose), invert_T(T_true))
+    return {
+        "focal_error_percent": ev.get("focal_error_percent"),
+        "center_error_px": ev.get("center_error_px"),
+        "cm": 100 * ev["translation_error_m"],
+        "deg": ev["rotation_error_deg"],
+        "pose_only_cm": 100 * dt,
+        "pose_only_deg": dr,
+        "refined": record["refined"],
+        "reason": record["reason"],
+        "focal_scale": record["focal_scale"],
+        "center_shift_px": record["center_shift_px"],
+        "focal_bound_percent": record["focal_bound_percent"],
+        "center_bound_px": record["center_bound_px"],
+        "correlation": record["correlation_focal_forward"],
+        "seconds": round(seconds, 1),
+    }
+
+
+def refine_case(model: str, sign: int, args, root: Path) -> dict:
+    """One model's lab: calibrated with the given (wrong) camera and with the true one."""
+    from nbcalib.transforms import offset_pose
+
+    scale, dx, dy = (float(v) for v in args.refine_offset.split(","))
+    scale = scale if sign > 0 else 2.0 - scale
+    shift = (sign * dx, sign * dy)
+    base = root / f"refine_{model}_{scale:g}"
+    out = base / "synth"
+    if not (out / "ground_truth.json").is_file():
+        shutil.rmtree(base, ignore_errors=True)
+        nbcalib("synth", out, "--lidar", args.lidar, "--camera", model, "--scene", args.scene,
+                "--pairs", args.pairs, "--seed", args.seed, "--format", "bag2",
+                "--given-focal-scale", f"{scale:g}",
+                "--given-center-shift", f"{shift[0]:g},{shift[1]:g}")  # fmt: skip
+    gt = out / "ground_truth.json"
+    bags = [out / f"pair_{k:03d}" for k in range(args.pairs)]
+    true = json.loads(gt.read_text())["intrinsics"]["rendered"]
+    typed = ["--camera-model", true["camera_model"],
+             "--intrinsics", ",".join(f"{v:.12g}" for v in true["intrinsics"])]  # fmt: skip
+    if true["distortion_coeffs"]:
+        typed += ["--distortion", ",".join(f"{v:.12g}" for v in true["distortion_coeffs"])]
+    T_true = read_ground_truth(gt)
+    start = offset_pose(T_true, 1.0, 0.05, START_SEED)
+    init = ",".join(f"{v:.12g}" for v in pose_to_xyz_quat(invert_T(start)))
+    row = {"model": model, "focal_scale": scale, "center_shift": shift}
+    for name, camera in (("given", []), ("true", typed)):
+        work = base / f"work_{name}"
+        if not (work / "calib.json").is_file():
+            nbcalib("preprocess", *bags, *camera, work)
+        row[name] = _calibrated(work, gt, init, args.refine)
+        r = row[name]
+        print(
+            f"{model} {name}: focal {r['focal_error_percent']:+.3f} %, centre "
+            f"{r['center_error_px']:.2f} px, pose {r['cm']:.2f} cm / {r['deg']:.3f} deg "
+            f"(pose only {r['pose_only_cm']:.2f} / {r['pose_only_deg']:.3f}), "
+            f"{'refined' if r['refined'] else 'kept: ' + r['reason']}, {r['seconds']} s",
+            file=sys.stderr,
+            flush=True,
+        )
+    return row
+
+
+def print_refine_table(rows) -> None:
+    """The refinement's table: errors with the wrong camera given, then with the true one."""
+    print("| model | given | focal error | centre error | pose error | pose alone | kept | "
+          "+-focal / centre (95 %) | corr f/tz | s |")  # fmt: skip
+    print("|---|---|---|---|---|---|---|---|---|---|")
+    for row in rows:
+        for name in ("given", "true"):
+            r = row[name]
+            given = (
+                f"x{row['focal_scale']:g}, {row['center_shift'][0]:+g},{row['center_shift'][1]:+g}"
+                if name == "given"
+                else "true"
+            )
+            print(
+                f"| {row['model']} | {given} | {r['focal_error_percent']:+.3f} % | "
+                f"{r['center_error_px']:.2f} px | {r['cm']:.2f} cm / {r['deg']:.3f} deg | "
+                f"{r['pose_only_cm']:.2f} cm / {r['pose_only_deg']:.3f} deg | "
+                f"{'refined' if r['refined'] else 'kept'} | {r['focal_bound_percent']:.3f} % / "
+                f"{r['center_bound_px'] or float('nan'):.2f} px | {r['correlation']:+.2f} | "
+                f"{r['seconds']} |"
+            )
+
+
 def real_case(name: str, spec: dict, root: Path, config, profile_too: bool = False) -> dict:
     from bench_real_frames import reference_pose
 
@@ -177,8 +290,19 @@ def main(argv=None) -> int:
     ap.add_argument("--real", default="", help="real sets of bench_real_frames.py, comma-separated")
     ap.add_argument("--profile", action="store_true",
                     help="also: the pose re-registered at each focal scale")  # fmt: skip
+    ap.add_argument("--refine", default="", help="focal or focal,center: the refinement's cases")
+    ap.add_argument("--refine-offset", default="1.015,4,-3",
+                    help="focal scale, DX, DY given (the sign alternates by model)")  # fmt: skip
     args = ap.parse_args(argv)
     root = args.keep or Path(tempfile.mkdtemp(prefix="nbcalib_intrinsics_"))
+    if args.refine:
+        models = [m for m in args.models.split(",") if m]
+        rows = [refine_case(m, 1 if k % 2 == 0 else -1, args, root) for k, m in enumerate(models)]
+        print_refine_table(rows)
+        print(json.dumps({"args": vars(args) | {"keep": str(args.keep)}, "refine": rows}))
+        if args.keep is None:
+            shutil.rmtree(root, ignore_errors=True)
+        return 0
     config = CalibrationConfig().refine
     rows = [
         synthetic_case(model, float(offset), args, root, config)

@@ -136,7 +136,23 @@ def run_job(spec: dict, frames: int | None, start: str, direction: int, work: Pa
     row["result"] = evaluate(work, reference, "T_lidar_camera") if run.returncode == 0 else None
     if row["result"] is not None:
         row["result_T_lidar_camera"] = json.loads(calib.read_text())["results"]["T_lidar_camera"]
+    row["intrinsics"] = intrinsics_figures(info)
     return row
+
+
+def intrinsics_figures(info: dict) -> dict:
+    """The refined intrinsics (``--refine-intrinsics``) and the report's check, when present."""
+    out = {}
+    refined = (info.get("calibration") or {}).get("intrinsics")
+    if refined:
+        keys = ("refined", "reason", "focal_scale", "center_shift_px", "focal_bound_percent",
+                "center_bound_px", "correlation_focal_forward")  # fmt: skip
+        out["refinement"] = {k: refined.get(k) for k in keys}
+        out["pose_only_T_lidar_camera"] = refined.get("pose_only_T_lidar_camera")
+    check = (info.get("quality") or {}).get("intrinsics_check")
+    if check:
+        out["check"] = check
+    return out
 
 
 def _error(e) -> str:
@@ -241,6 +257,8 @@ def main(argv=None) -> int:
                     )
                     if row.get("error"):
                         print(f"    {row['error']}", file=sys.stderr, flush=True)
+                    if row["intrinsics"]:
+                        print(f"    {json.dumps(row['intrinsics'])}", file=sys.stderr, flush=True)
     for line in basin_lines(rows):
         print(line)
     if args.keep is None:

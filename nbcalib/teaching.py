@@ -39,6 +39,7 @@ __all__ = [
     "plotter",
     "real_data_dir",
     "show",
+    "textured_box",
     "work_folder",
 ]
 
@@ -277,3 +278,36 @@ def first_run_note() -> bool:
 
 
 first_run_note()
+
+
+def textured_box(camera, back: float, rng, n: int = 25000):
+    """A textured box seen from inside by ``camera`` (the LiDAR frame = the camera's).
+
+    Its back wall ``back`` metres ahead, side walls at +-3 m, a floor and a ceiling; each
+    surface painted with one smooth texture. Returns the grey image (uint8) of each pixel's
+    first hit, and LiDAR points (``5 n``, 3) on the surfaces with the texture as intensity.
+    Several boxes of different depths are the smallest scene where a focal length can be told
+    from the camera's forward position (notebook 8; ``tests/test_refine_intrinsics.py``).
+    """
+
+    def texture(p):
+        return 0.5 + 0.25 * np.sin(2.3 * p[..., 0] + 1.1 * p[..., 2]) * np.cos(1.9 * p[..., 1])
+
+    planes = [(2, back), (1, 1.5), (1, -2.0), (0, -3.0), (0, 3.0)]
+    h, w = camera.height, camera.width
+    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
+    rays = camera.unproject(np.column_stack([u.ravel(), v.ravel()]))
+    depth = np.full(len(rays), np.inf)
+    for axis, offset in planes:
+        with np.errstate(divide="ignore", invalid="ignore"):
+            s = offset / rays[:, axis]
+        depth = np.where((s > 0.1) & (s < depth), s, depth)
+    hit = rays * np.where(np.isfinite(depth), depth, 0.0)[:, None]
+    image = np.where(np.isfinite(depth), texture(hit), 0.0).reshape(h, w)
+    points = []
+    for axis, offset in planes:
+        p = rng.uniform((-3.0, -2.0, 0.5), (3.0, 1.5, back), (n, 3))
+        p[:, axis] = offset
+        points.append(p)
+    points = np.concatenate(points)
+    return (255 * image).astype(np.uint8), points, texture(points)

@@ -242,6 +242,67 @@ for reason in bad.quality.reasons:
     print(" -", reason)
 
 # %% [markdown]
+# ## When the camera's focal length is off
+#
+# A target-less calibrator trusts the intrinsics it is given, and real ones are often a little
+# off. Seen from one place, a focal length a little long looks much like a camera a little
+# forward: both spread the image about its centre. So the extrinsic absorbs the error, and the
+# cost is happy. Three views of a box whose back wall is 4, 7 and 12 m away tell the two apart:
+# a forward move enlarges near things more than far ones, a focal length enlarges all alike.
+#
+# The camera given here has its focal length 1.5 % too long. Fine registration of the pose
+# alone walks forward; `intrinsics="focal"` refines the focal length with the pose over every
+# pair and takes the walk back, and says how well the frames fixed it.
+
+# %%
+from dataclasses import replace as with_settings
+
+from nbcalib.camera import example_camera, offset_intrinsics
+from nbcalib.config import CalibrationConfig
+from nbcalib.registration.pair import RegistrationPair
+from nbcalib.registration.refine import refine
+from nbcalib.teaching import textured_box
+
+true_camera = example_camera("pinhole", 320, 240)
+given_camera = offset_intrinsics(true_camera, focal_scale=1.015)
+rng = np.random.default_rng(4)
+boxes = [textured_box(true_camera, back, rng) for back in (4.0, 7.0, 12.0)]
+box_pairs = [RegistrationPair(given_camera, *box, f"box {k}") for k, box in enumerate(boxes)]
+settings = with_settings(CalibrationConfig().refine, pyramid_levels=0, intrinsics="focal")
+found = refine(box_pairs, np.eye(4), settings)  # the truth is the identity
+walk = pose_errors(found.intrinsics.T_pose_only, np.eye(4))
+back = pose_errors(found.T_camera_lidar, np.eye(4))
+focal_found = found.intrinsics.focal_scale * 1.015  # the refined focal length / the true one
+print(f"pose alone, focal 1.5 % long: {err_text(walk)}")
+print(f"pose and focal length       : {err_text(back)}, focal {100 * (focal_found - 1):+.3f} %")
+print(found.intrinsics.summary())
+
+# %%
+fig, ax = plt.subplots(figsize=(6, 3))
+ax.bar([0, 1], [100 * walk["translation_error_m"], 100 * back["translation_error_m"]], width=0.5)
+ax.set_xticks([0, 1], ["pose alone", "pose + focal length"])
+ax.set_ylabel("camera centre error, cm")
+ax.set_title("a focal length 1.5 % long moves the extrinsic; refining it takes it back")
+fig.tight_layout()
+
+# %% [markdown]
+# Three views of a flat wall 12 m away, one depth for all, cannot tell the two apart: the
+# focal length and the forward translation are then perfectly correlated, the bound on the
+# focal length is wide, and the given camera is kept, with the reason. (Walls at 4, 7 and 12 m
+# would do: it is the range of depths over the frames that counts.) On the command line:
+# `nbcalib run ... --refine-intrinsics focal` (or `focal,center`); every report also checks,
+# without refining, whether the given focal length agrees with the data.
+
+# %%
+walls = []
+for k in range(3):
+    image, points, intensities = textured_box(true_camera, 12.0, rng)
+    far = points[:, 2] >= 12.0 - 1e-9  # the back wall only
+    walls.append(RegistrationPair(given_camera, image, points[far], intensities[far], f"wall {k}"))
+flat = refine(walls, np.eye(4), settings)
+print(flat.intrinsics.summary())
+
+# %% [markdown]
 # ## The report on disk
 #
 # From the command line, `nbcalib report WORKDIR` (and the last step of `nbcalib run`) writes
@@ -269,4 +330,7 @@ for reason in bad.quality.reasons:
 #   centred on it, its uncertainty is within the verdict's limits and of the order of the true
 #   error, and the inside/outside sentence is what the numbers say;
 # - with the wrong image the verdict is `suspect`, for a flat cost: the curves rise less than a
-#   third as much.
+#   third as much;
+# - a focal length 1.5 % long moves the pose alone by centimetres; refined with the pose it
+#   comes back to within 0.2 %, and the pose to within a centimetre; from one flat wall per
+#   view the given camera is kept.

@@ -14,40 +14,14 @@ from nbcalib.config import CalibrationConfig
 from nbcalib.errors import InputError
 from nbcalib.registration.pair import RegistrationPair
 from nbcalib.registration.refine import refine
+from nbcalib.teaching import textured_box
 from nbcalib.transforms import invert_T, pose_error, se3_exp
-
-
-def _texture(p):
-    return 0.5 + 0.25 * np.sin(2.3 * p[..., 0] + 1.1 * p[..., 2]) * np.cos(1.9 * p[..., 1])
-
-
-def _room(camera, rng, back: float, n: int = 25000):
-    """A textured box (back wall at ``back`` m, side walls, floor, ceiling) seen from its
-    middle: the image of the texture at each pixel's first hit, and LiDAR points with it."""
-    planes = [(2, back), (1, 1.5), (1, -2.0), (0, -3.0), (0, 3.0)]
-    h, w = camera.height, camera.width
-    u, v = np.meshgrid(np.arange(w, dtype=np.float64), np.arange(h, dtype=np.float64))
-    rays = camera.unproject(np.column_stack([u.ravel(), v.ravel()]))
-    depth = np.full(len(rays), np.inf)
-    for axis, offset in planes:
-        with np.errstate(divide="ignore", invalid="ignore"):
-            s = offset / rays[:, axis]
-        depth = np.where((s > 0.1) & (s < depth), s, depth)
-    hit = rays * np.where(np.isfinite(depth), depth, 0.0)[:, None]
-    image = np.where(np.isfinite(depth), _texture(hit), 0.0).reshape(h, w)
-    points = []
-    for axis, offset in planes:
-        p = rng.uniform((-3.0, -2.0, 0.5), (3.0, 1.5, back), (n, 3))
-        p[:, axis] = offset
-        points.append(p)
-    points = np.concatenate(points)
-    return (255 * image).astype(np.uint8), points, _texture(points)
 
 
 def _pairs(true, given, rng, backs=(4.0, 7.0, 12.0)):
     out = []
     for k, back in enumerate(backs):
-        image, points, intensities = _room(true, rng, back)
+        image, points, intensities = textured_box(true, back, rng)
         out.append(RegistrationPair(given, image, points, intensities, f"room_{k}"))
     return out
 
@@ -92,7 +66,7 @@ def test_frames_at_one_depth_keep_the_given_camera(rng):
 
 def test_a_job_that_cannot_refine_is_refused_before_any_work(rng):
     cam = example_camera("pinhole", 160, 120)
-    image, points, intensities = _room(cam, rng, 6.0, n=2000)
+    image, points, intensities = textured_box(cam, 6.0, rng, n=2000)
     pair = RegistrationPair(cam, image, points, intensities, "one")
     with pytest.raises(InputError, match="at least 3 pairs"):
         refine([pair], np.eye(4), _config(intrinsics="focal"))
@@ -104,3 +78,40 @@ def test_a_job_that_cannot_refine_is_refused_before_any_work(rng):
         _config(intrinsics="focal", optimizer="nelder_mead")
     with pytest.raises(ValueError, match="intrinsics must be"):
         _config(intrinsics="skew")
+
+
+def test_the_report_check_flags_a_wrong_focal_length_and_passes_the_true_one(rng):
+    from nbcalib.report.intrinsics import check_intrinsics
+
+    true = example_camera("pinhole", 320, 240)
+    config = _config()
+    for given_scale, agrees in ((1.02, False), (1.0, True)):
+        given = offset_intrinsics(true, focal_scale=given_scale)
+        pairs = _pairs(true, given, rng)
+        T = refine(pairs, np.eye(4), config).T_camera_lidar  # the pose absorbs what it can
+        check = check_intrinsics(pairs, T, config, tolerance=0.003)
+        assert check.checked and check.agrees is agrees, check.note
+        assert check.focal_scale == pytest.approx(1 / given_scale, abs=0.004), check.note
+        assert ("looks" in check.note) is not agrees
+    one = check_intrinsics(pairs[:1], T, config, tolerance=0.003)
+    assert not one.checked and one.agrees and "not checked" in one.note
+
+
+def test_the_report_judges_the_pose_alone_with_the_result_camera(rng, monkeypatch):
+    from nbcalib.report import quality
+    from nbcalib.report.config import AssessConfig
+
+    seen = []
+
+    def restarts(pairs, T, config, acfg, step):  # the report's restarts: pose alone
+        seen.append(config.intrinsics)
+        return np.zeros((0, 6))
+
+    monkeypatch.setattr(quality, "_restart_offsets", restarts)
+    cam = example_camera("pinhole", 160, 120)
+    box = textured_box(cam, 6.0, rng, n=4000)
+    pairs = [RegistrationPair(cam, *box, f"same view {k}") for k in range(3)]  # one view
+    acfg = AssessConfig(restarts=1, curve_samples=3)
+    q = quality.assess(pairs, np.eye(4), config=_config(intrinsics="focal"), assess_config=acfg)
+    assert seen == [None]
+    assert q.intrinsics_check["checked"]

@@ -414,6 +414,9 @@ class Calibrator(GuessSteps, JobRecords):
             progress=True,
         )
         _detail(f"verdict: {self.quality.verdict}")
+        check = self.quality.intrinsics_check
+        if check is not None and check.get("checked"):
+            (_detail if check.get("agrees") else log.warning)(check["note"])
         names = [p.name for p in pairs]
         loaded = [p for p in self._pairs() if p.name in names]
         self.report = self.store.write_report(  # none in memory: the quality is the product

@@ -252,8 +252,10 @@ def identifiability(pairs, T: np.ndarray, theta, config: RefineConfig) -> dict:
     ``[delta, theta]`` (central differences of the exact gradient). The summed Hessian's
     non-positive curvatures are measured again from the cost's values (:func:`_remeasured`).
     Returns ``correlation``, ``focal_bound_percent`` and ``center_bound_px`` (module
-    docstring) and the jackknife's covariance ``covariance`` (6 + n, 6 + n) of ``[delta,
-    theta]``: the minimum without pair ``k`` lies ``-(H (K - 1) / K)^-1 (g - g_k)`` away.
+    docstring), the jackknife's covariance ``covariance`` (6 + n, 6 + n) of ``[delta,
+    theta]`` (the minimum without pair ``k`` lies ``-(H (K - 1) / K)^-1 (g - g_k)`` away), and
+    ``newton`` (6 + n,), one Newton step of the joint cost from ``(T, theta)``: where the
+    joint minimum lies to second order (the report's check, :mod:`nbcalib.report.intrinsics`).
     """
     from nbcalib.registration.costs import build_cost
     from nbcalib.registration.optimize import LBFGS_INTRINSICS_SCALE, LBFGS_SCALE
@@ -280,11 +282,12 @@ def identifiability(pairs, T: np.ndarray, theta, config: RefineConfig) -> dict:
     d = steps - steps.mean(axis=0)
     cov = (K - 1) / K * (d.T @ d)
     half = 1.96 * np.sqrt(np.maximum(np.diag(cov), 0.0))
-    focal = 100.0 * math.expm1(float(half[6]))
+    focal = 100.0 * math.expm1(min(float(half[6]), math.log(2.0)))  # at most 100 %
     center = float(max(half[7], half[8])) if theta.size == 3 else math.nan
     return {
         "correlation": correlation,
         "focal_bound_percent": focal,
         "center_bound_px": center,
         "covariance": cov,
+        "newton": -(C @ g_all),
     }

@@ -151,6 +151,9 @@ class Quality:
     reasons: list[str] = field(default_factory=list)
     next_steps: list[str] = field(default_factory=list)
     config: AssessConfig = field(default_factory=AssessConfig, repr=False)
+    #: Whether the given focal length agrees with the data
+    #: (:meth:`nbcalib.report.intrinsics.IntrinsicsCheck.to_dict`; None: not checked).
+    intrinsics_check: dict | None = None
 
     @property
     def at_trust_boundary(self) -> bool | None:
@@ -238,6 +241,8 @@ class Quality:
             out["move_from_start"] = move
         if self.pair_offsets is not None:
             out["pair_offsets"] = _finite(self.pair_offsets.tolist())
+        if self.intrinsics_check is not None:
+            out["intrinsics_check"] = _finite(self.intrinsics_check)
         return out
 
     def save(self, path) -> None:

@@ -89,6 +89,11 @@ class AssessConfig:
         but a Livox x pinhole pair's restarts then scattered to a "flat cost" (8.7 cm stated)
         on a good result; 100 000 kept it ok (0.74 cm) with its report 34 -> 25 s, not yet
         measured at scale (docs/BENCHMARKS.md 10).
+    intrinsics_check : bool
+        Check whether the given focal length agrees with the data at the result
+        (:func:`~nbcalib.report.intrinsics.check_intrinsics`; jobs of three pairs or more).
+    intrinsics_tolerance : float
+        Focal deviations up to this fraction are not flagged (0.003, 0.3 %).
     """
 
     confidence: float = 0.95
@@ -140,6 +145,8 @@ class AssessConfig:
     restart_scale: float = 3.0
     max_restart_rotation_deg: float = 0.2
     restart_points: int | None = None
+    intrinsics_check: bool = True
+    intrinsics_tolerance: float = 0.003
 
     def __post_init__(self):
         if not 0.0 < self.confidence < 1.0:
@@ -160,6 +167,8 @@ class AssessConfig:
             raise ValueError("restart_translation and restart_rotation_deg must be >= 0")
         if not (self.restart_scale >= 0.0 and self.max_restart_rotation_deg >= 0.0):
             raise ValueError("restart_scale and max_restart_rotation_deg must be >= 0")
+        if not self.intrinsics_tolerance >= 0.0:
+            raise ValueError(f"intrinsics_tolerance must be >= 0, got {self.intrinsics_tolerance}")
         if self.restart_points is not None and self.restart_points < 1:
             raise ValueError(f"restart_points must be >= 1 or None, got {self.restart_points}")
         if self.max_curvature_scale < 0:

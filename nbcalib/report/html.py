@@ -239,6 +239,7 @@ th { background: #f3f3f3; }
 .suspect { color: #fff; background: #b03a2e; padding: 0.2em 0.6em; border-radius: 4px; }
 img { max-width: 100%; border: 1px solid #ddd; margin: 0.3em 0 1em; }
 .note { color: #666; font-size: 0.9em; }
+.warn { border-left: 4px solid #b03a2e; padding-left: 0.6em; }
 """
 
 
@@ -312,10 +313,13 @@ def _move_html(q: Quality, init_stage) -> str:
     )
 
 
-def _intrinsics_html(entry: dict | None) -> str:
-    """The intrinsics refined with the extrinsic (``refine.intrinsics``), or nothing."""
+def _intrinsics_html(entry: dict | None, check: dict | None = None) -> str:
+    """The intrinsics: refined with the extrinsic (``refine.intrinsics``), or checked."""
     if not isinstance(entry, dict):
-        return ""
+        if not isinstance(check, dict) or not check.get("note"):
+            return ""
+        flag = "" if check.get("agrees", True) else ' class="warn"'
+        return f"<h2>Intrinsics</h2><p{flag}>{html.escape(str(check['note']))}.</p>"
     try:
         scale = float(entry["focal_scale"])
         found = (
@@ -418,7 +422,7 @@ def _page(
         f"<h1>Calibration report: {html.escape(str(workdir))}</h1>"
         "<p>T_lidar_camera (x, y, z in m; qx, qy, qz, qw): "
         f"<code>[{', '.join(f'{v:.6f}' for v in xyzq)}]</code></p>"
-        f"{_summary_html(q)}{_intrinsics_html(intrinsics)}"
+        f"{_summary_html(q)}{_intrinsics_html(intrinsics, q.intrinsics_check)}"
         f"<h2>Pairs</h2><p>Summed NID {q.nid:.4f}; optimiser converged: {conv}.</p>{init}"
         "<table><tr><th>pair</th><th>NID</th><th>visible points</th><th>pixels covered</th>"
         f"{offsets_head}</tr>{rows}</table>{spread}"

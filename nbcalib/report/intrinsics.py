@@ -8,9 +8,14 @@ pose for the given camera with ``fx, fy`` scaled by each of ``scales``; the scal
 cost (a parabola through the lowest sample and its neighbours) says how far the data would move
 the focal length, were the pose held.
 
-This is the measuring instrument of issue 47's check (deliverable 4), not yet part of the
-report: ``benchmarks/bench_intrinsics.py`` measures what it sees on the synthetic lab
-(``nbcalib synth --given-focal-scale``) and on the real sets.
+At the result of fine registration the scan sees little: the pose has absorbed what it could
+(docs/BENCHMARKS.md 14). So the report's check, :func:`check_intrinsics`, lets the pose move:
+it takes the Newton step of the joint cost in the pose and the focal scale from the result
+(their gradient and Hessian over every pair, :func:`nbcalib.registration.intrinsics.
+identifiability`), the profile's minimum to second order, and looks along it for the cost's
+lowest value (:func:`_along`), with the 95 % bound from leaving each pair out. A focal length
+that the data would move by more than ``assess.intrinsics_tolerance`` and by more than its bound
+does not agree with the data.
 """
 
 from __future__ import annotations
@@ -22,7 +27,7 @@ import numpy as np
 
 from nbcalib.camera import CameraModel, offset_intrinsics
 
-__all__ = ["FocalScan", "focal_scan", "scaled_focal"]
+__all__ = ["FocalScan", "IntrinsicsCheck", "check_intrinsics", "focal_scan", "scaled_focal"]
 
 #: Focal scales of a scan: +-3 % in 0.5 % steps.
 DEFAULT_SCALES = tuple(np.round(np.linspace(0.97, 1.03, 13), 6))
@@ -116,3 +121,122 @@ def focal_scan(
         values.append(cost.value(T))
     nid = np.asarray(values)
     return FocalScan(scales, nid, _vertex(scales, nid))
+
+
+@dataclass(frozen=True)
+class IntrinsicsCheck:
+    """Do the given intrinsics agree with the data at the result? (:func:`check_intrinsics`).
+
+    Attributes
+    ----------
+    checked : bool
+        False for a job the check cannot judge (fewer than three pairs): :attr:`note` says so.
+    agrees : bool
+        The focal length the data point to is within the tolerance, or within its own bound.
+    focal_scale : float
+        The focal length the joint cost's minimum has, over the given one (NaN unchecked).
+    focal_bound_percent : float
+        Its 95 % half-width, per cent.
+    correlation : float
+        Of focal length and forward translation at the result.
+    note : str
+        One line for the report: what was found and, when it disagrees, what to do.
+    """
+
+    checked: bool
+    agrees: bool
+    focal_scale: float
+    focal_bound_percent: float
+    correlation: float
+    note: str
+
+    def to_dict(self) -> dict:
+        """JSON-ready (``nbcalib.quality.intrinsics_check`` of ``calib.json``)."""
+        import math
+
+        def finite(x):
+            return float(x) if math.isfinite(x) else None
+
+        return {
+            "checked": self.checked,
+            "agrees": self.agrees,
+            "focal_scale": finite(self.focal_scale),
+            "focal_bound_percent": finite(self.focal_bound_percent),
+            "correlation_focal_forward": finite(self.correlation),
+            "note": self.note,
+        }
+
+
+#: Fractions of the Newton step at which :func:`_along` evaluates the cost.
+STEP_FRACTIONS = (0.0, 0.25, 0.5, 0.75, 1.0, 1.25, 1.5)
+
+
+def _along(pairs, T: np.ndarray, newton: np.ndarray, config) -> tuple[float, np.ndarray]:
+    """Where the joint cost is lowest along its Newton step from ``T``: (fraction, step).
+
+    One Newton step is the minimum of the cost's quadratic model, which over a focal error of
+    a few per cent overshoots (a 2 % error measured as 2.8 %, tests/test_refine_intrinsics.py):
+    the cost's own values at :data:`STEP_FRACTIONS` of the step, and the vertex of the parabola
+    through the lowest and its neighbours, say how far along it the minimum lies.
+    """
+    from nbcalib.registration.costs import build_cost
+    from nbcalib.transforms import se3_exp
+
+    step = np.asarray(newton, dtype=np.float64)
+    step = step * min(1.0, 0.1 / max(abs(float(step[6])), 1e-12))  # at most 10 % of focal
+    cost, _ = build_cost(pairs, T, config)
+    fractions = np.asarray(STEP_FRACTIONS)
+    values = [cost.value(se3_exp(f * step[:6]) @ T, intrinsics=f * step[6:]) for f in fractions]
+    return float(_vertex(fractions, np.asarray(values))), step
+
+
+def check_intrinsics(pairs: Sequence, T_camera_lidar, config, tolerance: float) -> IntrinsicsCheck:
+    """Whether the given focal length agrees with the data at ``T_camera_lidar`` (module doc).
+
+    Parameters
+    ----------
+    pairs : sequence of RegistrationPair
+        The job's pairs, with the camera the result goes with.
+    T_camera_lidar : ndarray of shape (4, 4)
+        The result.
+    config : RefineConfig
+        The cost's settings.
+    tolerance : float
+        Focal deviations up to this fraction are not flagged (``assess.intrinsics_tolerance``).
+    """
+    import math
+
+    from nbcalib.registration.intrinsics import MIN_PAIRS, identifiability
+
+    nan = math.nan
+    if len(pairs) < MIN_PAIRS or pairs[0].camera.model == "equirectangular":
+        why = (
+            "an equirectangular camera has no focal length"
+            if pairs[0].camera.model == "equirectangular"
+            else f"{len(pairs)} pair(s): at least {MIN_PAIRS} frames at several depths tell a "
+            "focal length from the camera's forward position"
+        )
+        return IntrinsicsCheck(False, True, nan, nan, nan, f"intrinsics not checked: {why}")
+    T = np.asarray(T_camera_lidar, dtype=np.float64)
+    fraction, step = _along(pairs, T, identifiability(pairs, T, [0.0], config)["newton"], config)
+    from nbcalib.transforms import se3_exp
+
+    # the bound where the joint minimum lies: away from it the pairs disagree about the pose
+    # because the focal length is wrong, and their scatter says that, not the bound
+    found = identifiability(pairs, se3_exp(fraction * step[:6]) @ T, fraction * step[6:], config)
+    scale = math.exp(float(fraction * step[6]))
+    bound = found["focal_bound_percent"]
+    off = 100.0 * (scale - 1.0)
+    agrees = abs(off) <= 100.0 * tolerance or abs(off) <= bound
+    if agrees:
+        note = (
+            f"the given focal length agrees with the data ({off:+.2f} % +- {bound:.2f} %, "
+            f"within {100 * tolerance:g} % or its bound)"
+        )
+    else:
+        note = (
+            f"the given focal length looks {off:+.2f} % off (+- {bound:.2f} %): the pose has "
+            "absorbed it; check the camera's intrinsics, or refine them with the extrinsic "
+            "(refine.intrinsics focal)"
+        )
+    return IntrinsicsCheck(True, agrees, scale, bound, found["correlation"], note)

@@ -189,7 +189,10 @@ def assess(
     # (bench_report_coverage on a loaded 2-core machine: 0.4 s CPU per case serial, 0.8-6.3 s
     # with the parallel kernels); the parallel ones from PARALLEL_MIN_POINTS on (a dense cloud
     # puts a million and more in view)
-    rcfg = replace(config or RefineConfig(), optimizer="lbfgs")
+    # the pose is judged with the camera the result goes with (the pairs'): restarts and the
+    # cost refine and measure the pose alone, whatever refined the intrinsics before
+    config = replace(config or RefineConfig(), intrinsics=None)
+    rcfg = replace(config, optimizer="lbfgs")
     if start_uncertainty is not None:
         from nbcalib.products import check_uncertainty
 
@@ -203,7 +206,8 @@ def assess(
     # one view (a camera that did not move) are one shot however many there are
     labels = views([p.image for p in pairs])
     n_restarts = acfg.restarts if len(np.unique(labels)) == 1 else 0
-    with Progress(len(pairs) + 6 + n_restarts, "quality", enabled=progress is True) as display:
+    n_steps = len(pairs) + 6 + n_restarts + int(acfg.intrinsics_check)
+    with Progress(n_steps, "quality", enabled=progress is True) as display:
 
         def step(what: str) -> None:
             if callable(progress):
@@ -262,7 +266,13 @@ def assess(
         curve_offsets, curve_values = _curves(costs, T, acfg, step)
         restart_offsets = np.zeros((0, 6))
         if n_restarts and sum(visible) > 0:
-            restart_offsets = _restart_offsets(pairs, T, config or RefineConfig(), acfg, step)
+            restart_offsets = _restart_offsets(pairs, T, config, acfg, step)
+        intrinsics = None
+        if acfg.intrinsics_check and sum(visible) > 0:
+            from nbcalib.report.intrinsics import check_intrinsics
+
+            intrinsics = check_intrinsics(pairs, T, rcfg, acfg.intrinsics_tolerance).to_dict()
+            step("intrinsics check")
     init_change = None
     if T_init is not None:
         T0 = validate_T(np.asarray(T_init, dtype=np.float64), "T_init")
@@ -295,6 +305,7 @@ def assess(
         views=labels,
         trust_region=(rcfg.trust_translation, rcfg.trust_rotation_deg),
         start_uncertainty=start_uncertainty,
+        intrinsics_check=intrinsics,
     )
     return rejudge(quality, acfg)
 
