@@ -206,7 +206,11 @@ def assess(
     # one view (a camera that did not move) are one shot however many there are
     labels = views([p.image for p in pairs])
     n_restarts = acfg.restarts if len(np.unique(labels)) == 1 else 0
-    n_steps = len(pairs) + 6 + n_restarts + int(acfg.intrinsics_check)
+    from nbcalib.registration.intrinsics import MIN_PAIRS
+
+    # the intrinsics check measures jobs of MIN_PAIRS pairs or more (a step of its own)
+    checked = acfg.intrinsics_check and len(pairs) >= MIN_PAIRS
+    n_steps = len(pairs) + 6 + n_restarts + int(checked)
     with Progress(n_steps, "quality", enabled=progress is True) as display:
 
         def step(what: str) -> None:
@@ -272,7 +276,8 @@ def assess(
             from nbcalib.report.intrinsics import check_intrinsics
 
             intrinsics = check_intrinsics(pairs, T, rcfg, acfg.intrinsics_tolerance).to_dict()
-            step("intrinsics check")
+            if checked:
+                step("intrinsics check")
     init_change = None
     if T_init is not None:
         T0 = validate_T(np.asarray(T_init, dtype=np.float64), "T_init")
