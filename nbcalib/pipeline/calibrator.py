@@ -147,9 +147,15 @@ class Calibrator(GuessSteps, JobRecords):
         elif manual is not None:
             skip.setdefault("find-matches", "run.manual")
         self.store.check_writable()
-        plan = plan_stages(
-            self, only=only, until=until, redo_from=redo_from, overwrite=overwrite, skip=skip
-        )
+        with self.store.lock():  # one job at a time in a work directory
+            plan = plan_stages(
+                self, only=only, until=until, redo_from=redo_from, overwrite=overwrite, skip=skip
+            )
+            self._run_plan(plan, only, fallback)
+        return self.result()
+
+    def _run_plan(self, plan, only, fallback) -> None:
+        """Run the planned stages in turn (the work directory locked by :meth:`run`)."""
         for k, (stage, runs, reason) in enumerate(plan):
             header = f"[{k + 1}/{len(plan)}] {stage}"
             if not runs:
@@ -173,7 +179,6 @@ class Calibrator(GuessSteps, JobRecords):
             self.ran.append(stage)
             if only is None:
                 log.info("    %s done in %.1f s", stage, self.seconds[stage])
-        return self.result()
 
     def _run_stage(self, stage: str) -> None:
         if stage == "preprocess":

@@ -11,6 +11,7 @@ Calibrator asks the store, never which kind of store it has.
 
 from __future__ import annotations
 
+import contextlib
 import json
 from pathlib import Path
 
@@ -37,6 +38,10 @@ class MemoryStore:
 
     def check_writable(self) -> None:
         """Refuse a place where products cannot be written (InputError naming it)."""
+
+    def lock(self):
+        """Nothing to lock in memory: a context that does nothing."""
+        return contextlib.nullcontext()
 
     def prepare(self) -> None:
         """Make room for a new preprocessing run, removing what it makes stale."""
@@ -107,6 +112,12 @@ class WorkDirStore:
     def check_writable(self) -> None:
         """Refuse a place where products cannot be written (InputError naming it)."""
         self.work.check_writable()
+
+    def lock(self):
+        """Hold the work directory's lock: one job at a time (:mod:`nbcalib.io.workdir_lock`)."""
+        from nbcalib.io.workdir_lock import workdir_lock
+
+        return workdir_lock(self.work.path)
 
     def prepare(self) -> None:
         """Make room for a new preprocessing run, removing what it makes stale."""

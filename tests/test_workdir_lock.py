@@ -1,0 +1,124 @@
+"""One job at a time in a work directory (issue 48): the lock, as a user meets it on the CLI.
+
+A second job on a work directory in use exits 2 at once at every stage that writes, naming the
+process that holds it and since when, and changes nothing; a lock left by a killed job is taken
+over with a one-line note; read-only commands run beside a job.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import pytest
+
+from nbcalib.cli import main
+from nbcalib.io.ground_truth import write_ground_truth
+from nbcalib.io.workdir_lock import LOCK_FILE, holder, workdir_lock
+from tests.test_bad_input import INIT, T_TRUE, _plain, base  # noqa: F401 (a fixture)
+
+
+def _digest(folder: Path) -> dict[str, str]:
+    return {
+        str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted(folder.rglob("*"))
+        if p.is_file()
+    }
+
+
+@pytest.fixture
+def work(base, tmp_path):  # noqa: F811
+    """A finished work directory of our own."""
+    out = tmp_path / "work"
+    shutil.copytree(base["finished"], out)
+    return out
+
+
+def _hold(path: Path) -> subprocess.Popen:
+    """Another process holding the lock of ``path`` until killed."""
+    code = textwrap.dedent(
+        f"""
+        import sys, time
+        from nbcalib.io.workdir_lock import workdir_lock
+        with workdir_lock({str(path)!r}):
+            print("held", flush=True)
+            time.sleep(600)
+        """
+    )
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    assert proc.stdout.readline().strip() == "held"
+    return proc
+
+
+def _stop(proc: subprocess.Popen, sig=signal.SIGTERM) -> None:
+    proc.send_signal(sig)
+    proc.wait(timeout=30)
+
+
+def test_a_second_job_is_refused_at_every_stage_that_writes(work, base, capsys):  # noqa: F811
+    proc = _hold(work)
+    try:
+        before = _digest(work)
+        for argv in (
+            ["preprocess", *_plain(base["inputs"]), str(work)],
+            ["find-matches", str(work), "--force"],
+            ["initial-guess", str(work), "--force"],
+            ["calibrate", str(work), f"--init={INIT}", "--force"],
+            ["report", str(work)],
+            ["run", str(work), "--force", "--no-matching", f"--init={INIT}"],
+        ):
+            status = main(["-q", *argv])
+            err = capsys.readouterr().err.strip().splitlines()
+            assert status == 2, (argv, err)
+            assert len(err) == 1 and "Traceback" not in err[0], err
+            assert str(work) in err[0] and "in use by" in err[0], err
+            assert f"process {proc.pid}" in err[0] and "since" in err[0], err
+            assert _digest(work) == before, argv  # nothing written
+    finally:
+        _stop(proc)
+
+
+def test_read_only_commands_run_beside_a_job(work, tmp_path, capsys):
+    gt = tmp_path / "ground_truth.json"
+    write_ground_truth(gt, T_TRUE)
+    proc = _hold(work)
+    try:
+        assert main(["-q", "evaluate", str(work), "--ground-truth", str(gt)]) == 0
+        assert main(["-q", "export", str(work), "--out", str(tmp_path / "out")]) == 0
+    finally:
+        _stop(proc)
+    capsys.readouterr()
+
+
+def test_a_lock_left_by_a_killed_job_is_taken_over(work, caplog):
+    proc = _hold(work)
+    _stop(proc, signal.SIGKILL)  # killed: the lock file still names it
+    assert holder(work)["pid"] == proc.pid
+    assert main(["-q", "report", str(work)]) == 0
+    notes = [r.getMessage() for r in caplog.records if "took over the lock" in r.getMessage()]
+    assert len(notes) == 1 and f"process {proc.pid}" in notes[0], notes
+    assert holder(work) is None  # released cleanly: the file is empty
+
+
+def test_the_lock_is_released_and_one_process_may_take_it_again(tmp_path):
+    path = tmp_path / "w"
+    with workdir_lock(path):
+        assert holder(path)["pid"] == os.getpid()
+        with workdir_lock(path):  # a stage inside a job
+            assert holder(path)["pid"] == os.getpid()
+        assert holder(path)["pid"] == os.getpid()
+    assert holder(path) is None
+    assert not path.exists()  # made for the job, nothing written: not left behind
+    path.mkdir()
+    (path / "calib.json").write_text("{}")
+    with workdir_lock(path):
+        pass
+    assert sorted(p.name for p in path.iterdir()) == [LOCK_FILE, "calib.json"]
+    assert json.loads((path / "calib.json").read_text()) == {}
