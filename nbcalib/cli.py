@@ -14,7 +14,9 @@ import argparse
 import importlib
 import logging
 import re
+import signal
 import sys
+import threading
 import traceback
 
 from nbcalib import __version__
@@ -153,8 +155,31 @@ def _log_to_stderr(level: int) -> None:
     logger.setLevel(level)
 
 
+class Terminated(BaseException):
+    """SIGTERM, raised in the main thread: the job unwinds as for Ctrl-C (issue 48).
+
+    Its files are written atomically (a temporary file renamed into place, removed on any
+    exception) and its work-directory lock released, so what a stage finished stays and what it
+    had begun leaves nothing; ``nbcalib run WORKDIR`` goes on from the last finished stage.
+    """
+
+
+def _terminate(signum, frame):
+    raise Terminated()
+
+
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
+    in_main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, _terminate) if in_main else None
+    try:
+        return _main(argv)
+    finally:
+        if in_main:
+            signal.signal(signal.SIGTERM, signal.SIG_DFL if previous is None else previous)
+
+
+def _main(argv: list[str] | None) -> int:
     parser = build_parser()
     args = _parse(parser, join_negative_values(sys.argv[1:] if argv is None else list(argv)))
     if args.command is None:
@@ -174,6 +199,9 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print(f"nbcalib {args.command}: interrupted", file=sys.stderr)
         return 130
+    except Terminated:
+        print(f"nbcalib {args.command}: terminated", file=sys.stderr)
+        return 128 + signal.SIGTERM
     except BrokenPipeError:  # `nbcalib ... | head`: the reader left; not an error of ours
         sys.stderr.close()
         return 0

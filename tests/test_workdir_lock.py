@@ -122,3 +122,36 @@ def test_the_lock_is_released_and_one_process_may_take_it_again(tmp_path):
         pass
     assert sorted(p.name for p in path.iterdir()) == [LOCK_FILE, "calib.json"]
     assert json.loads((path / "calib.json").read_text()) == {}
+
+
+def _until(proc: subprocess.Popen, text: str) -> list[str]:
+    """stderr lines of ``proc`` up to the first one holding ``text``."""
+    lines = []
+    for line in proc.stderr:
+        lines.append(line)
+        if text in line:
+            return lines
+    raise AssertionError(f"{text!r} never came: {''.join(lines)[-2000:]}")
+
+
+def test_sigterm_ends_a_job_in_one_line_and_run_resumes_to_the_same_result(base, tmp_path):  # noqa: F811
+    """SIGTERM during fine registration: exit 143, one line; ``run WORKDIR`` then finishes
+    with the result of a run that was never stopped, to the last digit."""
+    argv = [*_plain(base["inputs"]), "--no-matching", f"--init={INIT}", "--pyramid-levels", "0"]
+    whole = tmp_path / "whole"
+    assert main(["-q", "run", *argv, str(whole)]) == 0
+    stopped = tmp_path / "stopped"
+    cmd = [sys.executable, "-m", "nbcalib", "-v", "run", *argv, str(stopped)]
+    proc = subprocess.Popen(cmd, stderr=subprocess.PIPE, stdout=subprocess.DEVNULL, text=True)
+    _until(proc, "outer 1 ")
+    proc.send_signal(signal.SIGTERM)
+    rest = proc.stderr.read().strip().splitlines()
+    assert proc.wait(timeout=60) == 143
+    assert rest[-1] == "nbcalib run: terminated", rest[-3:]
+    assert not any("Traceback" in line for line in rest)
+    assert holder(stopped) is None  # the lock released
+    calib = json.loads((stopped / "calib.json").read_text())
+    assert "T_lidar_camera" not in calib.get("results", {})  # no result that looks finished
+    assert main(["-q", "run", str(stopped)]) == 0  # resumes: calibrate and report
+    done = [json.loads((w / "calib.json").read_text())["results"] for w in (whole, stopped)]
+    assert done[0]["T_lidar_camera"] == done[1]["T_lidar_camera"]
