@@ -11,6 +11,7 @@ problem, no traceback), 1 internal failure.
 from __future__ import annotations
 
 import argparse
+import errno
 import importlib
 import logging
 import re
@@ -155,6 +156,24 @@ def _log_to_stderr(level: int) -> None:
     logger.setLevel(level)
 
 
+#: Errors of a full file system: a user's to fix, not a bug.
+_DISK_FULL = (errno.ENOSPC, errno.EDQUOT)
+
+
+def _written(filename) -> str:
+    """The file being written, as the user knows it.
+
+    A temporary file or folder of an atomic write (``.NAME.PID.HEX.tmp``) is named NAME.
+    """
+    return re.sub(r"(^|/)\.([^/]+)\.\d+\.[0-9a-f]+\.tmp(?=/|$)", r"\1\2", str(filename))
+
+
+def _internal_error(args) -> int:
+    traceback.print_exc()
+    print(f"nbcalib {args.command}: internal error (a bug: please report it)", file=sys.stderr)
+    return 1
+
+
 class Terminated(BaseException):
     """SIGTERM, raised in the main thread: the job unwinds as for Ctrl-C (issue 48).
 
@@ -212,10 +231,20 @@ def _main(argv: list[str] | None) -> int:
         reason = (exc.strerror or type(exc).__name__).lower()
         print(f"nbcalib {args.command}: error: {where}{reason}", file=sys.stderr)
         return 2
+    except OSError as exc:
+        if exc.errno not in _DISK_FULL:
+            return _internal_error(args)
+        # a full disk (or quota): every file is written atomically, so the one being written
+        # was not, and what was there before is as it was
+        where = f"{_written(exc.filename)}: " if exc.filename else ""
+        print(
+            f"nbcalib {args.command}: error: {where}{(exc.strerror or 'disk full').lower()}: "
+            "not written (what was there before is kept); free some space and run again",
+            file=sys.stderr,
+        )
+        return 2
     except Exception:
-        traceback.print_exc()
-        print(f"nbcalib {args.command}: internal error (a bug: please report it)", file=sys.stderr)
-        return 1
+        return _internal_error(args)
     return int(status or 0)
 
 

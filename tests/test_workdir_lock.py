@@ -155,3 +155,37 @@ def test_sigterm_ends_a_job_in_one_line_and_run_resumes_to_the_same_result(base,
     assert main(["-q", "run", str(stopped)]) == 0  # resumes: calibrate and report
     done = [json.loads((w / "calib.json").read_text())["results"] for w in (whole, stopped)]
     assert done[0]["T_lidar_camera"] == done[1]["T_lidar_camera"]
+
+
+@pytest.mark.parametrize("stage", ["preprocess", "calibrate", "report", "run"])
+def test_a_full_disk(stage, base, tmp_path, monkeypatch, capsys):  # noqa: F811
+    """ENOSPC at the first file a stage writes: exit 2, one line naming the file, nothing
+    half-written; the previous result and record as they were (preprocess, into a new work
+    directory: nothing that looks finished)."""
+    import errno
+
+    from nbcalib.io import _files
+
+    work = tmp_path / "work"
+    if stage != "preprocess":
+        shutil.copytree(base["finished"], work)
+    before = _digest(work) if work.exists() else {}
+
+    def full(fd):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(_files.os, "fsync", full)
+    argv = {
+        "preprocess": ["preprocess", *_plain(base["inputs"]), str(work)],
+        "calibrate": ["calibrate", str(work), f"--init={INIT}", "--force"],
+        "report": ["report", str(work)],
+        "run": ["run", str(work), "--from", "calibrate", "--no-matching", f"--init={INIT}"],
+    }[stage]
+    status = main(["-q", *argv])
+    err = capsys.readouterr().err.strip().splitlines()
+    assert status == 2, err
+    assert len(err) == 1 and "no space left on device" in err[0], err
+    assert str(work) in err[0] and ".tmp" not in err[0], err
+    after = _digest(work) if work.exists() else {}
+    assert not [name for name in after if name.endswith(".tmp")], after
+    assert after.get("calib.json") == before.get("calib.json")  # as it was, or none
