@@ -36,7 +36,8 @@ def write_bytes_atomic(path, parts: Iterable[bytes | memoryview | np.ndarray]) -
         os.replace(tmp, path)
     except OSError as exc:
         tmp.unlink(missing_ok=True)
-        if exc.filename is None or str(exc.filename) == str(tmp):  # name the file meant
+        unnamed = exc.filename is None or str(exc.filename) == str(tmp)
+        if exc.errno is not None and unnamed:  # name the file meant, not the temporary one
             raise type(exc)(exc.errno, exc.strerror, str(path)) from exc
         raise
     except BaseException:
