@@ -207,6 +207,7 @@ def check_intrinsics(pairs: Sequence, T_camera_lidar, config, tolerance: float) 
     import math
 
     from nbcalib.registration.intrinsics import MIN_PAIRS, identifiability
+    from nbcalib.transforms import se3_exp
 
     nan = math.nan
     if len(pairs) < MIN_PAIRS or pairs[0].camera.model == "equirectangular":
@@ -219,8 +220,6 @@ def check_intrinsics(pairs: Sequence, T_camera_lidar, config, tolerance: float) 
         return IntrinsicsCheck(False, True, nan, nan, nan, f"intrinsics not checked: {why}")
     T = np.asarray(T_camera_lidar, dtype=np.float64)
     fraction, step = _along(pairs, T, identifiability(pairs, T, [0.0], config)["newton"], config)
-    from nbcalib.transforms import se3_exp
-
     # the bound where the joint minimum lies: away from it the pairs disagree about the pose
     # because the focal length is wrong, and their scatter says that, not the bound
     found = identifiability(pairs, se3_exp(fraction * step[:6]) @ T, fraction * step[6:], config)
