@@ -10,7 +10,7 @@ result.
 Run one at a time on an idle machine:
 
     python benchmarks/bench_memory.py --pairs 1,15          # BENCHMARKS (issue 48)
-    python benchmarks/bench_memory.py --pairs 15,50 --keep /tmp/mem
+    python benchmarks/bench_memory.py --pairs 15,50 --keep DIR    # keep and reuse the data
 
 Prints a Markdown table and one JSON line.
 """
