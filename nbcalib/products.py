@@ -33,6 +33,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from nbcalib.clouds import Cloud
+
 if TYPE_CHECKING:  # the camera module loads the numba kernels
     from nbcalib.camera import CameraModel
 
@@ -74,7 +76,7 @@ class VirtualCamera:
         return -T[:3, :3].T @ T[:3, 3]
 
 
-@dataclass(frozen=True, eq=False)
+@dataclass(frozen=True, eq=False, init=False)
 class PairData:
     """One LiDAR-camera pair after preprocessing (and rendering).
 
@@ -84,26 +86,66 @@ class PairData:
         Data name (a bag's name, or ``000000``, ``000001``... for plain files).
     image : ndarray of shape (H, W), uint8
         The camera image as used: grey, histogram-equalised unless switched off.
-    points_lidar : ndarray of shape (N, 3), float64
-        The dense cloud in the LiDAR frame, metres (float32 values, as the PLY stores them).
-    intensities : ndarray of shape (N,), float64
-        Equalised intensities in [0, 1) (float32 values).
+    cloud : Cloud
+        The dense cloud and its intensities, held or read from the work directory when
+        needed (:mod:`nbcalib.clouds`); :attr:`points_lidar` and :attr:`intensities` are its
+        arrays.
     lidar_image : LidarImage or None
         The virtual camera's rendering of the cloud: intensity image and index map (rows of
         ``points_lidar``, -1 empty); None before the render step.
     summary : dict
         What preprocessing did (mode, scans, points), for records.
+
+    ``PairData(name, image, points_lidar, intensities, lidar_image, summary)`` holds the
+    arrays; ``PairData(name, image, cloud=cloud, ...)`` takes a cloud.
     """
 
     name: str
     image: np.ndarray
-    points_lidar: np.ndarray
-    intensities: np.ndarray
+    cloud: Cloud
     lidar_image: object = None
     summary: dict | None = None
 
+    def __init__(
+        self,
+        name: str,
+        image: np.ndarray,
+        points_lidar=None,
+        intensities=None,
+        lidar_image=None,
+        summary: dict | None = None,
+        *,
+        cloud: Cloud | None = None,
+    ):
+        if points_lidar is not None or intensities is not None:
+            # arrays make a new cloud (``replace(pair, points_lidar=...)`` with the old one)
+            if cloud is not None:
+                points_lidar = cloud.points if points_lidar is None else points_lidar
+                intensities = cloud.intensities if intensities is None else intensities
+            cloud = Cloud(points_lidar, intensities)
+        elif cloud is None:
+            raise ValueError("a pair needs its points and intensities, or a cloud")
+        for key, value in (
+            ("name", name),
+            ("image", image),
+            ("cloud", cloud),
+            ("lidar_image", lidar_image),
+            ("summary", summary),
+        ):
+            object.__setattr__(self, key, value)
+
     def __len__(self) -> int:
-        return int(self.points_lidar.shape[0])
+        return len(self.cloud)
+
+    @property
+    def points_lidar(self) -> np.ndarray:
+        """The dense cloud (N, 3), LiDAR frame, metres, float64 (float32 values: the PLY's)."""
+        return self.cloud.points
+
+    @property
+    def intensities(self) -> np.ndarray:
+        """Equalised intensities (N,) in [0, 1) (float32 values), float64."""
+        return self.cloud.intensities
 
     @property
     def lidar_index(self) -> np.ndarray:

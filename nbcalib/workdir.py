@@ -458,8 +458,12 @@ class WorkDir:
         write_png(self.lidar_intensity_path(pair.name), np.asarray(lidar_image.intensity, np.uint8))
         write_index_map(self.lidar_index_path(pair.name), index)
 
-    def load_pair(self, name: str) -> PairData:
+    def load_pair(self, name: str, *, budget=None) -> PairData:
         """Load one data name's products and check that they fit together.
+
+        The cloud is read when its points are first asked for (:class:`~nbcalib.clouds.Cloud`,
+        its size and fields checked from the PLY's header now), and kept in ``budget``
+        (a :class:`~nbcalib.clouds.MemoryBudget`; default: kept once read, without limit).
 
         Raises
         ------
@@ -467,19 +471,17 @@ class WorkDir:
             A missing or corrupt file, a cloud without intensity, or an index map that refers to
             points the cloud does not have; the message names the file.
         """
+        from nbcalib.clouds import Cloud, MemoryBudget
         from nbcalib.io.image import read_image
-        from nbcalib.io.ply import read_ply_fields
-        from nbcalib.preprocess.lidar_image import LidarImage
+        from nbcalib.io.ply import read_ply_vertex_header
 
         _check_name(name)
         image = _read_uint8(self.image_path(name), read_image)
         cloud_path = self.cloud_path(name)
-        fields = read_ply_fields(cloud_path)
-        missing = [k for k in ("x", "y", "z", "intensity") if k not in fields]
+        size, names = read_ply_vertex_header(cloud_path)
+        missing = [k for k in ("x", "y", "z", "intensity") if k not in names]
         if missing:
             raise InputError(f"the cloud lacks the vertex properties {missing}", cloud_path)
-        points = np.column_stack([fields[k] for k in "xyz"]).astype(np.float64)
-        intensities = np.asarray(fields["intensity"], dtype=np.float64)
         lidar_intensity = _read_uint8(self.lidar_intensity_path(name), read_image)
         index_path = self.lidar_index_path(name)
         index = read_index_map(index_path)
@@ -489,17 +491,21 @@ class WorkDir:
                 f"{lidar_intensity.shape[1]}x{lidar_intensity.shape[0]}",
                 index_path,
             )
-        if index.size and index.max() >= len(points):
+        if index.size and index.max() >= size:
             raise InputError(
-                f"index map refers to point {index.max()}, {cloud_path.name} has {len(points)}",
+                f"index map refers to point {index.max()}, {cloud_path.name} has {size}",
                 index_path,
             )
-        lidar_image = LidarImage(lidar_intensity, index, None)
-        return PairData(name, image, points, intensities, lidar_image)
+        del lidar_intensity, index  # checked: read again when asked for
+        lidar_image = StoredLidarImage(self, name)
+        budget = MemoryBudget(None) if budget is None else budget
+        cloud = Cloud(path=cloud_path, size=size, budget=budget)
+        return PairData(name, image, lidar_image=lidar_image, cloud=cloud)
 
-    def load_pairs(self, names=None) -> list[PairData]:
+    def load_pairs(self, names=None, *, budget=None) -> list[PairData]:
         """:meth:`load_pair` for each name (default: every name of ``calib.json``)."""
-        return [self.load_pair(name) for name in (self.names() if names is None else names)]
+        names = self.names() if names is None else names
+        return [self.load_pair(name, budget=budget) for name in names]
 
     # ---------------------------------------------------------------- matching
     def write_matches(self, found, pair: PairData, *, draw: bool = True) -> None:
@@ -608,6 +614,40 @@ class WorkDir:
 def _check_name(name: str) -> None:
     if not isinstance(name, str) or not name or name != Path(name).name or name.startswith("."):
         raise ValueError(f"a data name must be a plain file name, got {name!r}")
+
+
+class StoredLidarImage:
+    """A pair's LiDAR image and index map in a work directory, read each time asked for.
+
+    What :class:`~nbcalib.preprocess.lidar_image.LidarImage` holds, without its depth: a
+    job's pairs keep 5 MB less each (a 1024 x 1024 virtual camera) between the few stages that
+    look at them (matching, the manual picker, the report's figures).
+    """
+
+    depth = None
+
+    def __init__(self, work: WorkDir, name: str):
+        self.work, self.name = work, name
+
+    def __repr__(self) -> str:
+        return f"StoredLidarImage({self.name!r})"
+
+    @property
+    def intensity(self) -> np.ndarray:
+        """``round(255 * intensity)`` of the nearest point (H, W), uint8."""
+        from nbcalib.io.image import read_image
+
+        return _read_uint8(self.work.lidar_intensity_path(self.name), read_image)
+
+    @property
+    def index(self) -> np.ndarray:
+        """Row of the nearest point in the cloud (H, W), int32, -1 where empty."""
+        return read_index_map(self.work.lidar_index_path(self.name))
+
+    @property
+    def filled(self) -> np.ndarray:
+        """Boolean (H, W) mask of pixels that show a point."""
+        return self.index >= 0
 
 
 def _read_uint8(path: Path, read_image) -> np.ndarray:

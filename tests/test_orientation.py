@@ -139,8 +139,9 @@ def test_build_cost_is_the_point_weighted_mean_of_class_nids(rng):
 
 def test_classes_are_computed_once_and_only_where_asked(rng, monkeypatch):
     pair, truth = _pair(rng, (3000, 3000, 3000))
-    pair.points_lidar = pair.points_lidar.copy()
-    pair.points_lidar[5] = np.nan  # the cost drops it; it gets class 0 and no neighbours
+    points = pair.points_lidar.copy()
+    points[5] = np.nan  # the cost drops it; it gets class 0 and no neighbours
+    pair = RegistrationPair(pair.camera, pair.image, points, pair.intensities)
     some = np.arange(0, len(truth), 2)
     first = pair.orientation_classes(some)
     assert np.all(pair.classes[some] >= 0) and np.all(pair.classes[1::2] == -1)
@@ -169,18 +170,22 @@ def test_config_rejects_bad_min_class_points():
         RefineConfig(min_class_points=0)
 
 
-def test_a_replaced_cloud_gets_fresh_classes(rng):
+def test_classes_belong_to_the_cloud(rng):
+    """Pairs made from one another share their cloud's classes; another cloud has its own."""
     from dataclasses import replace as dc_replace
 
     pair, _ = _pair(rng, (3000, 3000, 3000))
-    pair.orientation_classes()
-    fewer = dc_replace(
-        pair, points_lidar=pair.points_lidar[:150], intensities=pair.intensities[:150]
+    classes = pair.orientation_classes()
+    moved = dc_replace(pair, camera=example_camera("pinhole", 320, 240))
+    assert moved.cloud is pair.cloud and moved.classes is pair.classes
+    points, values = pair.points_lidar[:150], pair.intensities[:150]
+    fewer = RegistrationPair(pair.camera, pair.image, points, values)
+    assert fewer.classes is None
+    assert fewer.orientation_classes().shape == (150,) and np.all(fewer.classes >= 0)
+    flipped = RegistrationPair(
+        pair.camera, pair.image, pair.points_lidar[::-1].copy(), pair.intensities[::-1].copy()
     )
-    classes = fewer.orientation_classes()  # the copied cache belongs to the old cloud
-    assert classes.shape == (150,) and np.all(classes >= 0)
-    pair.points_lidar = pair.points_lidar[::-1].copy()
-    assert np.array_equal(pair.orientation_classes(), fresh_classes(pair))
+    assert np.array_equal(flipped.orientation_classes(), classes[::-1])
 
 
 def fresh_classes(pair):

@@ -54,9 +54,12 @@ def test_frames_at_one_depth_keep_the_given_camera(rng):
     true = example_camera("pinhole", 320, 240)
     given = offset_intrinsics(true, focal_scale=1.02)
     pairs = _pairs(true, given, rng, backs=(12.0, 12.0, 12.0))
-    for p in pairs:  # a flat wall only: depth cannot tell focal length from forward motion
-        far = p.points_lidar[:, 2] >= 12.0 - 1e-9
-        p.points_lidar, p.intensities = p.points_lidar[far], p.intensities[far]
+    # a flat wall only: depth cannot tell focal length from forward motion
+    far = [p.points_lidar[:, 2] >= 12.0 - 1e-9 for p in pairs]
+    pairs = [
+        replace(p, points_lidar=p.points_lidar[f], intensities=p.intensities[f])
+        for p, f in zip(pairs, far)
+    ]
     result = refine(pairs, np.eye(4), _config(intrinsics="focal"))
     assert not result.intrinsics.refined
     assert "focal length" in result.intrinsics.reason

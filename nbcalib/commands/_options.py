@@ -248,6 +248,10 @@ REFINE = (
     Option("--job-points", "refine.job_points",
            "points of all pairs together at most, an equal share each (none: no joint "
            "limit)", "N"),
+    Option("--cloud-memory", "refine.cloud_memory_mb",
+           "megabytes kept of the dense clouds and what is computed from them between uses; "
+           "the rest is read again from WORKDIR (same result, more time; none: no limit)",
+           "MB"),
     Option("--max-outer", "refine.max_outer",
            "outer iterations at most, per pyramid level and per optimiser of the hybrid", "N"),
     Option("--depth-margin", "refine.depth_margin", "visibility depth margin, metres", "M"),

@@ -84,6 +84,66 @@ def _parse_ply_header(data: bytes, path: Path) -> tuple[str, list[_PlyElement], 
     return fmt, elements, offset
 
 
+def _read_head(path: Path) -> bytes:
+    """The first 64 KB of a file (a PLY header fits), as :func:`read_bytes` names errors."""
+    try:
+        with open(path, "rb") as stream:
+            head = stream.read(1 << 16)
+    except FileNotFoundError:
+        raise InputError("file not found", path=path) from None
+    except IsADirectoryError:
+        raise InputError("is a directory, expected a file", path=path) from None
+    except OSError as exc:
+        raise InputError(f"cannot read: {exc.strerror}", path=path) from None
+    if not head:
+        raise InputError("empty file", path=path)
+    return head
+
+
+def _vertex_layout(path: Path):
+    """``(dtype, count, offset)`` of a binary PLY whose first element is the vertices; else None.
+
+    Checks what :func:`read_ply_fields` checks of such a file, and that the file holds its
+    vertices.
+    """
+    head = _read_head(path)
+    if b"end_header" not in head:
+        return None  # a header past 64 KB: the whole file is parsed
+    fmt, elements, offset = _parse_ply_header(head, path)
+    if fmt == "ascii" or not elements or elements[0].name != "vertex":
+        return None
+    vertex = elements[0]
+    if vertex.has_list:
+        raise InputError("vertex element with list properties is not supported", path=path)
+    names = [name for name, _ in vertex.properties]
+    if not names:
+        raise InputError("vertex element without properties", path=path)
+    if len(set(names)) != len(names):
+        raise InputError(f"duplicate vertex properties: {' '.join(names)}", path=path)
+    byte_order = _PLY_FORMATS[fmt]
+    dtype = np.dtype([(name, byte_order + code) for name, code in vertex.properties])
+    held = max(path.stat().st_size - offset, 0) // dtype.itemsize
+    if held < vertex.count:
+        raise InputError(f"expected {vertex.count} vertices, file holds {held}", path=path)
+    return dtype, vertex.count, offset
+
+
+def read_ply_vertex_header(path) -> tuple[int, list[str]]:
+    """The vertex count and property names of a PLY file, from its header alone.
+
+    For a binary file, the file must be long enough for its vertices (a truncated file is an
+    :class:`~nbcalib.errors.InputError` naming it, as :func:`read_ply_fields` would raise). An
+    ascii file is read whole (its rows cannot be counted from the header).
+    """
+    path = Path(path)
+    layout = _vertex_layout(path)
+    if layout is None:
+        fields = read_ply_fields(path)
+        return len(next(iter(fields.values()))), list(fields)
+    dtype, count, _ = layout
+    return count, list(dtype.names)
+
+
 def read_ply_fields(path) -> dict[str, np.ndarray]:
     """Every property of the ``vertex`` element of a PLY file (ascii, binary LE or BE).
 
@@ -96,6 +156,12 @@ def read_ply_fields(path) -> dict[str, np.ndarray]:
         One array per vertex property, native byte order.
     """
     path = Path(path)
+    layout = _vertex_layout(path)
+    if layout is not None:  # binary, vertices first: straight from the file, no copy of it
+        dtype, count, offset = layout
+        if count == 0:
+            return struct_to_fields(np.zeros(0, dtype=dtype))
+        return struct_to_fields(np.fromfile(path, dtype=dtype, count=count, offset=offset))
     data = read_bytes(path)
     fmt, elements, offset = _parse_ply_header(data, path)
     byte_order = _PLY_FORMATS[fmt]

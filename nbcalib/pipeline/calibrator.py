@@ -54,6 +54,7 @@ class Calibrator(GuessSteps, JobRecords):
         self.virtual = None
         self.pairs = None
         self._registration: tuple | None = None  # (key, RegistrationPairs)
+        self._budget = None  # MemoryBudget of the dense clouds (_memory)
         self.matches: dict = {}
         self.guess = None
         self.start: Start | None = None
@@ -182,10 +183,10 @@ class Calibrator(GuessSteps, JobRecords):
 
     def _run_stage(self, stage: str) -> None:
         if stage == "preprocess":
-            # III-C: scans -> dense cloud per pair; equalised intensities and image
-            pairs = self._preprocess()
+            # III-C: scans -> dense cloud per pair; equalised intensities and image;
             # III-D: one virtual camera renders every cloud: LiDAR image + index map
-            self._render(pairs)
+            self._preprocess()
+            self._write_preprocess_record()
         elif stage == "find-matches":
             # III-D: camera image x camera-shaped LiDAR views -> 2D-3D correspondences
             self._match()
@@ -200,9 +201,9 @@ class Calibrator(GuessSteps, JobRecords):
             self._assess()
 
     # ================================================================ the steps
-    def _preprocess(self) -> list:
+    def _preprocess(self) -> None:
         from nbcalib.preprocess.origin import lidar_origin
-        from nbcalib.preprocess.prepare import check_pairs, prepare_pair
+        from nbcalib.preprocess.prepare import check_pairs
 
         if self._inputs is None or getattr(self._inputs, "empty", False):
             raise InputError(
@@ -217,22 +218,57 @@ class Calibrator(GuessSteps, JobRecords):
         self._inputs_record = self._inputs.to_dict()
         # where the LiDAR sits in the clouds' frame: views and the LiDAR image are seen from there
         self._origin = lidar_origin(pair_inputs, self.config.preprocess)
+        for pair in pair_inputs:  # the scans it read are read again by their pair
+            getattr(pair.scans, "release", lambda: None)()
         _detail(self._origin.describe())
-        one = len(pair_inputs) == 1
+        self._forget_after("preprocess")
+        self.pairs = self._prepare_and_write(pair_inputs)
 
-        def prepare(pair):  # pairs on every core (nbcalib._threads); a bar only for one pair
+    def _prepare_and_write(self, pending: list) -> list:
+        """Each pair's dense cloud, rendered, written; the pairs as the job goes on with them.
+
+        One pair after another on every core, each let go once written (its cloud then read
+        from the work directory when needed: :meth:`~nbcalib.pipeline.store.WorkDirStore.
+        write_pair`), so that preprocessing holds a pair per core, not the recording. The
+        virtual camera is chosen from the first pair; the others wait for it.
+        """
+        import threading
+
+        from nbcalib.preprocess.prepare import (
+            choose_virtual_camera,
+            describe_virtual_camera,
+            prepare_pair,
+            render_pair,
+        )
+
+        one = len(pending) == 1
+        chosen = threading.Event()
+
+        def prepare(k: int):  # pairs on every core (nbcalib._threads); a bar only for one pair
+            pair, pending[k] = pending[k], None  # let go of the inputs once prepared
             log.info("    %s", pair.name)
-            return prepare_pair(pair, self.config.preprocess, log=_detail, progress=one)
+            try:
+                data = prepare_pair(pair, self.config.preprocess, log=_detail, progress=one)
+                if k == 0:
+                    self.virtual = choose_virtual_camera(data, self._origin.xyz)
+                    _detail(describe_virtual_camera(self.virtual))
+            finally:
+                getattr(pair.scans, "release", lambda: None)()
+                del pair
+                if k == 0:
+                    chosen.set()
+            chosen.wait()
+            if self.virtual is None:  # the first pair failed: its error is raised first
+                raise InputError("the first pair could not be prepared")
+            return self.store.write_pair(render_pair(self.virtual, data), self._memory())
 
-        return thread_map(prepare, pair_inputs)
+        self.virtual = None
+        return thread_map(prepare, range(len(pending)))
 
-    def _render(self, pairs) -> None:
-        from nbcalib.preprocess.prepare import render_pairs
+    def _write_preprocess_record(self) -> None:
+        """calib.json of the new work directory: the camera, the pairs, the virtual camera."""
         from nbcalib.workdir import make_calib, set_virtual_camera
 
-        self.virtual, self.pairs = render_pairs(pairs, origin=self._origin.xyz, log=_detail)
-        self._forget_after("preprocess")
-        thread_map(self.store.write_pair, self.pairs)
         topics = self._topics
         calib = make_calib(
             self.camera,
@@ -261,7 +297,7 @@ class Calibrator(GuessSteps, JobRecords):
         log.info(
             "    calibrating %d pair(s), %d points, %s, start: %s",
             len(pairs),
-            sum(len(p.points_lidar) for p in pairs),
+            sum(len(p) for p in pairs),
             cfg.optimizer,
             start.source,
         )
@@ -511,8 +547,17 @@ class Calibrator(GuessSteps, JobRecords):
 
     def _pairs(self) -> list:
         if self.pairs is None:
-            self.pairs = self.store.load_pairs()
+            self.pairs = self.store.load_pairs(budget=self._memory())
         return self.pairs
+
+    def _memory(self):
+        """The job's :class:`~nbcalib.clouds.MemoryBudget` for its dense clouds (one per job)."""
+        from nbcalib.clouds import MemoryBudget
+
+        if self._budget is None:
+            mb = self.config.refine.cloud_memory_mb
+            self._budget = MemoryBudget(None if mb is None else int(mb * 2**20))
+        return self._budget
 
     def _registration_pairs(self) -> list:
         """The pairs fine registration and the report work on, made once per loaded data.
@@ -533,10 +578,7 @@ class Calibrator(GuessSteps, JobRecords):
             or len(cached[0]) != len(key)
             or any(a is not b for a, b in zip(cached[0], key))
         ):
-            made = [
-                RegistrationPair(camera, p.image, p.points_lidar, p.intensities, p.name)
-                for p in pairs
-            ]
+            made = [RegistrationPair(camera, p.image, name=p.name, cloud=p.cloud) for p in pairs]
             self._registration = (key, made)
         return self._registration[1]
 

@@ -64,12 +64,13 @@ class MemoryStore:
         """The records of a preprocessed job, else an InputError saying why."""
         raise InputError("nothing is preprocessed in this job: run its preprocess stage first")
 
-    def load_pairs(self) -> list:
+    def load_pairs(self, *, budget=None) -> list:
         """The preprocessed pairs kept by an earlier run."""
         return self.require_preprocessed()
 
-    def write_pair(self, pair) -> None:
-        """Keep one preprocessed pair (image, cloud, LiDAR image, index map)."""
+    def write_pair(self, pair, budget=None):
+        """Keep one preprocessed pair; returns it as the job goes on with it (here: itself)."""
+        return pair
 
     def write_matches(self, found, pair, *, draw: bool) -> None:
         """Keep one pair's matches and correspondences (and their picture)."""
@@ -143,14 +144,33 @@ class WorkDirStore:
         """The records of a preprocessed job, else an InputError saying why."""
         return self.work.require_preprocessed()
 
-    def load_pairs(self) -> list:
-        """The preprocessed pairs kept by an earlier run."""
-        self.work.require_preprocessed()
-        return self.work.load_pairs()
+    def load_pairs(self, *, budget=None) -> list:
+        """The preprocessed pairs kept by an earlier run.
 
-    def write_pair(self, pair) -> None:
-        """Keep one preprocessed pair (image, cloud, LiDAR image, index map)."""
+        Their clouds are read when needed and kept in ``budget``
+        (:class:`~nbcalib.clouds.MemoryBudget`) as it allows.
+        """
+        self.work.require_preprocessed()
+        return self.work.load_pairs(budget=budget)
+
+    def write_pair(self, pair, budget=None):
+        """Keep one preprocessed pair (image, cloud, LiDAR image, index map).
+
+        Returns the pair as the job goes on with it: its cloud now read from the PLY just
+        written when needed (the same float32 values), kept in ``budget`` as it allows, and its
+        LiDAR image read when asked for, so that a job's memory does not grow with its pairs.
+        """
+        from dataclasses import replace
+
+        from nbcalib.clouds import Cloud
+
         self.work.write_pair(pair)
+        if budget is None:
+            return pair
+        from nbcalib.workdir import StoredLidarImage
+
+        cloud = Cloud(path=self.work.cloud_path(pair.name), size=len(pair), budget=budget)
+        return replace(pair, cloud=cloud, lidar_image=StoredLidarImage(self.work, pair.name))
 
     def write_matches(self, found, pair, *, draw: bool) -> None:
         """Keep one pair's matches and correspondences (and their picture)."""

@@ -28,7 +28,16 @@ from nbcalib.preprocess.config import PreprocessConfig
 from nbcalib.preprocess.sources import PairInput
 from nbcalib.products import PairData, VirtualCamera
 
-__all__ = ["check_pairs", "choose_mode", "prepare_pair", "render_pairs"]
+__all__ = [
+    "check_pairs",
+    "check_scans",
+    "choose_mode",
+    "choose_virtual_camera",
+    "describe_virtual_camera",
+    "prepare_pair",
+    "render_pair",
+    "render_pairs",
+]
 
 
 def _azimuth_coverage_deg(points: np.ndarray) -> float:
@@ -55,7 +64,8 @@ def check_pairs(pairs: Sequence[PairInput], camera: CameraModel) -> None:
 
     Checks: at least one pair, unique names, one camera for all bags, images of at least
     :data:`MIN_IMAGE_SIDE` pixels a side and of the camera's size, scans that hold points and
-    intensities.
+    intensities (:func:`check_scans`; scans read only when their pair is prepared are checked
+    then, by :func:`prepare_pair`).
     """
     if not pairs:
         raise InputError("nothing to preprocess: no bag and no point cloud given")
@@ -81,14 +91,20 @@ def check_pairs(pairs: Sequence[PairInput], camera: CameraModel) -> None:
                 f"the image is {w} x {h} but the camera is {camera.width} x {camera.height}",
                 path=pair.image_source,
             )
-        for i, scan in enumerate(pair.scans):
-            if scan.points.shape[0] == 0:
-                raise InputError(f"scan {i} of pair '{pair.name}' holds no finite point")
-        if all(scan.intensity is None for scan in pair.scans):
-            raise InputError(
-                f"the point clouds of pair '{pair.name}' have no intensity field "
-                "(choose one with the intensity channel option)"
-            )
+        if not getattr(pair.scans, "deferred", False):  # scans read later are checked then
+            check_scans(pair)
+
+
+def check_scans(pair: PairInput) -> None:
+    """Refuse a pair whose scans hold no point or no intensity (the message names the pair)."""
+    for i, scan in enumerate(pair.scans):
+        if scan.points.shape[0] == 0:
+            raise InputError(f"scan {i} of pair '{pair.name}' holds no finite point")
+    if all(scan.intensity is None for scan in pair.scans):
+        raise InputError(
+            f"the point clouds of pair '{pair.name}' have no intensity field "
+            "(choose one with the intensity channel option)"
+        )
 
 
 def _to_uint8(image: np.ndarray) -> np.ndarray:
@@ -178,6 +194,8 @@ def prepare_pair(
 
     config = config or PreprocessConfig()
     log = log or (lambda line: None)
+    if getattr(pair.scans, "deferred", False):
+        check_scans(pair)
     mode = choose_mode(pair, config)
     t0 = time.perf_counter()
     log(f"{pair.name}: {len(pair.scans)} scan(s), {mode} integration")
@@ -210,6 +228,35 @@ def prepare_pair(
     return PairData(pair.name, image, points, intensities, summary=summary)
 
 
+def choose_virtual_camera(pair: PairData, origin=None) -> VirtualCamera:
+    """The virtual camera every pair is rendered with, chosen from ``pair``'s field of view.
+
+    As the reference: one virtual camera for all pairs, a pinhole under 150 degrees, else
+    equirectangular, placed at ``origin`` (where the LiDAR sits in the clouds' frame; default
+    the clouds' origin) and measuring the field of view from there.
+    """
+    from nbcalib.preprocess.lidar_image import estimate_lidar_fov, make_virtual_camera
+
+    o = np.zeros(3) if origin is None else np.asarray(origin, dtype=np.float64)
+    fov = estimate_lidar_fov(pair.points_lidar - o if o.any() else pair.points_lidar)
+    camera, T_vcam_lidar = make_virtual_camera(fov)
+    if o.any():  # the camera at the LiDAR: p_vcam = R (p - o)
+        T_vcam_lidar[:3, 3] = -T_vcam_lidar[:3, :3] @ o
+    return VirtualCamera(camera, T_vcam_lidar, math.degrees(fov))
+
+
+def render_pair(virtual: VirtualCamera, pair: PairData) -> PairData:
+    """``pair`` with its LiDAR intensity image and index map rendered by ``virtual``."""
+    from nbcalib.preprocess.lidar_image import render_lidar_image
+
+    image = render_lidar_image(
+        virtual.camera, virtual.T_vcam_lidar, pair.points_lidar, pair.intensities
+    )
+    filled = int(np.count_nonzero(image.index >= 0))
+    summary = {**(pair.summary or {}), "lidar_image_filled_pixels": filled}
+    return replace(pair, lidar_image=image, summary=summary)
+
+
 def render_pairs(
     pairs: Sequence[PairData],
     virtual: VirtualCamera | None = None,
@@ -225,7 +272,7 @@ def render_pairs(
         Dense clouds (:func:`prepare_pair`).
     virtual : VirtualCamera, optional
         The camera to render with; default: chosen from the first pair's LiDAR field of view
-        (as the reference: one virtual camera for all pairs).
+        (:func:`choose_virtual_camera`).
     origin : array_like of shape (3,), optional
         Where the LiDAR sits in the clouds' frame (:mod:`nbcalib.preprocess.origin`): the
         default camera is placed there and the field of view measured from there (default:
@@ -237,32 +284,17 @@ def render_pairs(
     -------
     virtual : VirtualCamera
     pairs : list of PairData
-        The same pairs with ``lidar_image`` set.
+        The same pairs with ``lidar_image`` set (:func:`render_pair`).
     """
-    from nbcalib.preprocess.lidar_image import (
-        estimate_lidar_fov,
-        make_virtual_camera,
-        render_lidar_image,
-    )
-
     log = log or (lambda line: None)
     if not pairs:
         raise ValueError("render_pairs needs at least one pair")
     if virtual is None:
-        o = np.zeros(3) if origin is None else np.asarray(origin, dtype=np.float64)
-        fov = estimate_lidar_fov(pairs[0].points_lidar - o if o.any() else pairs[0].points_lidar)
-        camera, T_vcam_lidar = make_virtual_camera(fov)
-        if o.any():  # the camera at the LiDAR: p_vcam = R (p - o)
-            T_vcam_lidar[:3, 3] = -T_vcam_lidar[:3, :3] @ o
-        virtual = VirtualCamera(camera, T_vcam_lidar, math.degrees(fov))
-        log(f"LiDAR field of view {virtual.fov_deg:.1f} deg: {camera.model} virtual camera")
+        virtual = choose_virtual_camera(pairs[0], origin)
+        log(describe_virtual_camera(virtual))
+    return virtual, thread_map(lambda pair: render_pair(virtual, pair), pairs)  # every core
 
-    def render(pair):
-        image = render_lidar_image(
-            virtual.camera, virtual.T_vcam_lidar, pair.points_lidar, pair.intensities
-        )
-        filled = int(np.count_nonzero(image.index >= 0))
-        summary = {**(pair.summary or {}), "lidar_image_filled_pixels": filled}
-        return replace(pair, lidar_image=image, summary=summary)
 
-    return virtual, thread_map(render, pairs)  # every core (nbcalib._threads)
+def describe_virtual_camera(virtual: VirtualCamera) -> str:
+    """One line: the field of view measured and the virtual camera it chose."""
+    return f"LiDAR field of view {virtual.fov_deg:.1f} deg: {virtual.camera.model} virtual camera"

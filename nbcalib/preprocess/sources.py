@@ -11,7 +11,7 @@ both and sits above them.
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -26,6 +26,7 @@ __all__ = [
     "CLOUD_SUFFIXES",
     "IMAGE_SUFFIXES",
     "PLAIN_FILES_NAME",
+    "DeferredScans",
     "PairInput",
     "SharedClouds",
     "bag_name",
@@ -158,15 +159,73 @@ def bag_topics(bag, config: PreprocessConfig, path) -> tuple[str, str, str, Came
     return points_topic, image_topic, info_topic, camera
 
 
+class DeferredScans(Sequence):
+    """A pair's scans, read when first asked for and dropped again by :meth:`release`.
+
+    A job of many bags holds one bag's scans at a time per core instead of every bag's: the
+    topics, the first image and the number of scans are read when the bag is gathered, the
+    scans when the pair is prepared (:func:`nbcalib.preprocess.prepare.prepare_pair`, which
+    checks them then).
+    """
+
+    #: Read later: :func:`~nbcalib.preprocess.prepare.check_pairs` leaves them to the pair.
+    deferred = True
+
+    def __init__(self, read: Callable[[], list], count: int):
+        import threading
+
+        self._read = read
+        self._count = int(count)
+        self._scans: list | None = None
+        self._lock = threading.Lock()
+
+    def __repr__(self) -> str:
+        return f"DeferredScans({self._count} scans, {'read' if self._scans else 'not read'})"
+
+    def _held(self) -> list:
+        with self._lock:
+            if self._scans is None:
+                self._scans = self._read()
+            return self._scans
+
+    def __len__(self) -> int:
+        return self._count if self._scans is None else len(self._scans)
+
+    def __getitem__(self, index):
+        return self._held()[index]
+
+    def __iter__(self):
+        return iter(self._held())
+
+    def release(self) -> None:
+        """Forget the scans read (they are read again if asked for)."""
+        with self._lock:
+            self._scans = None
+
+
 def gather_bag(path, config: PreprocessConfig) -> PairInput:
-    """Read one bag: every point cloud of the points topic, the first image, the camera info."""
+    """One bag's pair: its topics, first image and camera info now, its scans when needed.
+
+    The scans (every point cloud of the points topic, at most ``config.max_scans``) are a
+    :class:`DeferredScans`: read when the pair is prepared.
+    """
     from nbcalib.io.bag import open_bag
 
     path = Path(path)
     with open_bag(path) as bag:
         points_topic, image_topic, info_topic, camera = bag_topics(bag, config, path)
         image = first_image(bag, image_topic, path)
-        scans = bag_scans(bag, points_topic, config, path)
+        count = len(bag.stamps(points_topic))
+    if count == 0:
+        raise InputError(f"point cloud topic {points_topic} has no messages", path=path)
+    if config.max_scans is not None:
+        count = min(count, config.max_scans)
+
+    def read() -> list:
+        with open_bag(path) as again:
+            return bag_scans(again, points_topic, config, path)
+
+    scans = DeferredScans(read, count)
     topics = {
         "points_topic": points_topic,
         "image_topic": image_topic,

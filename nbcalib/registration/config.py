@@ -137,6 +137,12 @@ class RefineConfig:
         (never below ``min_sampled_points``; None: no joint limit). A single pair keeps its
         own budget unless its camera has more than 4 million pixels; fifteen pairs use a
         fifteenth each (docs/BENCHMARKS.md, section 10).
+    cloud_memory_mb : float or None
+        Megabytes a job with a work directory keeps of its dense clouds (the work directory's
+        float32 values) and of what fine registration and the report compute from them
+        (visible sets, sample keys, KD-trees) from one use to the next (512). What does not
+        fit is read again from the work directory, or computed again, when needed: the same
+        numbers in more time (:mod:`nbcalib.clouds`). None: no limit.
     min_visible_points : int
         Fewer LiDAR points than this in the images at a pose being refined is refused (a user
         error: the start looks away from the cloud, or the camera does not fit the images):
@@ -184,6 +190,7 @@ class RefineConfig:
     points_per_pixel: float | None = 0.25
     min_sampled_points: int = 50_000
     job_points: int | None = 1_000_000
+    cloud_memory_mb: float | None = 512.0
     min_visible_points: int = 100
     intrinsics: str | None = None
     intrinsics_focal_range: float = 0.05
@@ -224,6 +231,8 @@ class RefineConfig:
             raise ValueError(f"min_visible_points must be >= 1, got {self.min_visible_points}")
         if self.min_sampled_points < 1:
             raise ValueError(f"min_sampled_points must be >= 1, got {self.min_sampled_points}")
+        if self.cloud_memory_mb is not None and not self.cloud_memory_mb >= 0:
+            raise ValueError(f"cloud_memory_mb must be >= 0 or None, got {self.cloud_memory_mb}")
         if self.job_points is not None and self.job_points < 1:
             raise ValueError(f"job_points must be >= 1 or None, got {self.job_points}")
         if self.points_per_pixel is not None and not self.points_per_pixel > 0:

@@ -15,12 +15,26 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from nbcalib.camera import CameraModel, create_camera
+from nbcalib.clouds import Cloud
 from nbcalib.registration.config import RefineConfig
 
 __all__ = ["RegistrationPair", "downscale_camera", "downscale_image", "visible_subset"]
 
 
-@dataclass
+class _Tree:
+    """A KD-tree of a cloud's finite points, and those points' rows."""
+
+    def __init__(self, points: np.ndarray):
+        from nbcalib.registration.orientation import kdtree
+
+        # non-finite points are dropped by the cost; they get class 0 and no neighbours
+        self.finite = np.flatnonzero(np.isfinite(points).all(axis=1))
+        self.tree = kdtree(points[self.finite]) if self.finite.size >= 3 else None
+        # the tree copies the points (24 B), keeps an index each (8 B) and its nodes (~16 B)
+        self.nbytes_estimate = int(self.finite.nbytes + 48 * self.finite.size)
+
+
+@dataclass(init=False, eq=False)
 class RegistrationPair:
     """One LiDAR-camera pair: a camera, its grey image, and the dense LiDAR cloud.
 
@@ -29,9 +43,9 @@ class RegistrationPair:
     camera : CameraModel
     image : ndarray of shape (H, W), uint8 or float in [0, 1]
         Grey (equalised) camera image.
-    points_lidar : ndarray of shape (N, 3), float
-        Dense cloud in the LiDAR frame, metres.
-    intensities : ndarray of shape (N,), float in [0, 1]
+    points_lidar : ndarray of shape (N, 3), float, optional
+        Dense cloud in the LiDAR frame, metres (or give ``cloud``).
+    intensities : ndarray of shape (N,), float in [0, 1], optional
         Equalised LiDAR intensities.
     name : str, optional
     classes : ndarray of shape (N,), int8, optional
@@ -42,46 +56,107 @@ class RegistrationPair:
         For a pair of another camera of a rig: this camera from the rig's reference camera,
         whose ``T_camera_lidar`` is refined (the pair is seen at ``T_camera_rig @ T``). None:
         the pair's camera is the one refined.
+    cloud : Cloud, optional
+        Instead of ``points_lidar`` and ``intensities``: the cloud, held or read from the work
+        directory when needed (:mod:`nbcalib.clouds`). Pairs made from one another
+        (``dataclasses.replace``) share it, and with it what is computed from the cloud, unless
+        given new arrays.
     """
 
     camera: CameraModel
     image: np.ndarray
-    points_lidar: np.ndarray
-    intensities: np.ndarray
+    cloud: Cloud = field(repr=False)
     name: str = ""
-    classes: np.ndarray | None = field(default=None, repr=False)
-    T_camera_rig: np.ndarray | None = field(default=None, repr=False, compare=False)
-    _edges: tuple | None = field(default=None, repr=False, compare=False)
-    _tree: object = field(default=None, repr=False, compare=False)
-    _finite: np.ndarray | None = field(default=None, repr=False, compare=False)
-    _cache_key: tuple | None = field(default=None, repr=False, compare=False)
-    _keys: np.ndarray | None = field(default=None, repr=False, compare=False)
-    _visible: tuple | None = field(default=None, repr=False, compare=False)
+    T_camera_rig: np.ndarray | None = field(default=None, repr=False)
+
+    def __init__(
+        self,
+        camera: CameraModel,
+        image,
+        points_lidar=None,
+        intensities=None,
+        name: str = "",
+        classes=None,
+        T_camera_rig=None,
+        *,
+        cloud: Cloud | None = None,
+    ):
+        if points_lidar is not None or intensities is not None:
+            # arrays make a new cloud (``replace(pair, points_lidar=...)`` with the old one)
+            if cloud is not None:
+                points_lidar = cloud.points if points_lidar is None else points_lidar
+                intensities = cloud.intensities if intensities is None else intensities
+            if points_lidar is None or intensities is None:
+                raise ValueError("a registration pair needs its points and intensities, or a cloud")
+            cloud = Cloud(points_lidar, intensities, classes=classes)
+        elif cloud is None:
+            raise ValueError("a registration pair needs its points and intensities, or a cloud")
+        elif classes is not None:
+            cloud.classes = np.asarray(classes, dtype=np.int8)
+        self.camera = camera
+        self.image = image
+        self.cloud = cloud
+        self.name = name
+        self.T_camera_rig = T_camera_rig
+
+    @property
+    def points_lidar(self) -> np.ndarray:
+        """The dense cloud (N, 3), LiDAR frame (read from its file if not held)."""
+        return self.cloud.points
+
+    @property
+    def intensities(self) -> np.ndarray:
+        """The intensities (N,), in [0, 1]."""
+        return self.cloud.intensities
+
+    @property
+    def classes(self) -> np.ndarray | None:
+        """Orientation classes known so far (-1: not yet), or None before the first ask."""
+        return self.cloud.classes
+
+    @classes.setter
+    def classes(self, value) -> None:
+        self.cloud.classes = None if value is None else np.asarray(value, dtype=np.int8)
+
+    def __len__(self) -> int:
+        return len(self.cloud)
+
+    def held(self):
+        """``with pair.held():`` reads the cloud once for the block (:meth:`Cloud.held`)."""
+        return self.cloud.held()
 
     def visibility(self, T_camera_lidar, margin: float, window: int):
-        """:func:`~nbcalib.preprocess.lidar_image.visibility` at one pose, kept for later calls.
+        """The visible points at one pose and their pixels, kept for later calls.
 
-        The report asks for the visible set at the result four times (its cost, the pixels
-        covered, the overlays) and at the start once: the z-buffer is computed once per pose
-        for the last two poses asked.
+        :func:`~nbcalib.preprocess.lidar_image.visibility`, returned as ``(keep, pixel)``:
+        the visible points' rows in cloud order (M,) and the flat pixel of each (M,), both
+        int64. The report asks for the visible set at the result four times (its cost, the
+        pixels covered, the overlays) and at the start once: the z-buffer's answer is kept for
+        the last two poses asked of the cloud (as the job's memory budget allows, in int32:
+        5.6 MB a Livox pair where the z-buffer's own arrays take 23 MB).
         """
         from nbcalib.preprocess.lidar_image import visibility
 
         T = np.asarray(T_camera_lidar, dtype=np.float64)
-        key = (T.tobytes(), float(margin), int(window))
-        memo = [
-            m
-            for m in (self._visible or ())
-            # the camera and the cloud themselves, not their ids (an id is reused once freed)
-            if m[1] is self.camera and m[2] is self.points_lidar
-        ]
-        for m in memo:
-            if m[0] == key:
-                return m[3], m[4]
-        found = visibility(self.camera, T, self.points_lidar, margin=margin, window=window)
-        entry = (key, self.camera, self.points_lidar, *found)
-        self._visible = (entry, *memo[:1])
-        return entry[3], entry[4]
+        cloud, camera = self.cloud, self.camera
+        key = ("visible", T.tobytes(), float(margin), int(window), id(camera))
+
+        def make():
+            keep, pixel = visibility(camera, T, cloud.points, margin=margin, window=window)
+            small = len(cloud) < 2**31 and camera.width * camera.height < 2**31
+            kind = np.int32 if small else np.int64
+            return camera, keep.astype(kind), pixel[keep].astype(kind)
+
+        entry = cloud.memo(key, make)
+        if entry[0] is not camera:  # another camera at the same address: not this one's
+            cloud.forget(key)
+            entry = cloud.memo(key, make)
+        with cloud._lock:
+            asked = [k for k in getattr(cloud, "_visible_keys", []) if k != key] + [key]
+            cloud._visible_keys = asked[-2:]
+        for old in asked[:-2]:
+            cloud.forget(old)
+        return entry[1].astype(np.int64), entry[2].astype(np.int64)
 
     def structure(self) -> tuple[np.ndarray, np.ndarray]:
         """(depth-edge score per point, image edge strength): the structure channel, made once.
@@ -90,64 +165,55 @@ class RegistrationPair:
         """
         from nbcalib.registration.structure import depth_edge_scores, image_edges
 
-        key = (id(self.points_lidar), id(self.image))
-        if self._edges is None or self._edges[0] != key:
-            self._edges = (key, depth_edge_scores(self.points_lidar), image_edges(self.image))
-        return self._edges[1], self._edges[2]
+        image = self.image
+        scores = self.cloud.memo("depth_edges", lambda: depth_edge_scores(self.points_lidar))
+        edges = self.cloud.memo(("image_edges", id(image)), lambda: (image, image_edges(image)))
+        if edges[0] is not image:
+            edges = (image, image_edges(image))
+        return scores, edges[1]
 
     def sample(self, visible: np.ndarray, budget: float | None) -> np.ndarray:
         """About ``budget`` of the ``visible`` point indices (all of them if fewer), in order.
 
-        A seeded random key per point (drawn once per cloud) keeps the points whose key falls
-        under the needed rate, so the subset is the same for every pose and nests across
-        pyramid levels; None keeps them all.
+        A seeded random key per point (drawn the same for every cloud of its size) keeps the
+        points whose key falls under the needed rate, so the subset is the same for every pose
+        and nests across pyramid levels; None keeps them all.
         """
         if budget is None or visible.size <= budget:
             return visible
-        n = len(self.points_lidar)
-        if self._keys is None or len(self._keys) != n:
-            self._keys = np.random.default_rng(0).random(n, dtype=np.float32)
-        return visible[self._keys[visible] < budget / visible.size]
+        n = len(self.cloud)
+        keys = self.cloud.memo("keys", lambda: np.random.default_rng(0).random(n, dtype=np.float32))
+        return visible[keys[visible] < budget / visible.size]
 
     def orientation_classes(self, indices=None) -> np.ndarray:
         """Orientation classes of the points ``indices`` (default all), each computed once.
 
-        Normals need a KD-tree of the whole cloud (built on first use) but are computed only
-        for the points asked for: the ones the camera sees.
+        Normals need a KD-tree of the whole cloud (built when a point's class is first asked
+        for, and kept as the job's memory budget allows) but are computed only for the points
+        asked for: the ones the camera sees.
         """
         from nbcalib.registration.orientation import class_of_normals, point_normals
 
-        pts = np.asarray(self.points_lidar, dtype=np.float64)
-        key = (id(self.points_lidar), len(pts))
-        if self._cache_key != key:
-            # a new cloud (dataclasses.replace copies the fields): keep given classes only if
-            # they fit it, and forget the KD-tree of the old one
-            fits = self.classes is not None and len(self.classes) == len(pts)
-            if not fits or self._cache_key is not None:
-                self.classes = None
-            self._tree = self._finite = None
-            self._cache_key = key
-        if self.classes is None:
-            self.classes = np.full(len(pts), -1, dtype=np.int8)
-        idx = np.arange(len(pts)) if indices is None else np.asarray(indices, dtype=np.int64)
-        missing = idx[self.classes[idx] < 0]
+        cloud = self.cloud
+        n = len(cloud)
+        if cloud.classes is None or len(cloud.classes) != n:
+            cloud.classes = np.full(n, -1, dtype=np.int8)
+        classes = cloud.classes
+        idx = np.arange(n) if indices is None else np.asarray(indices, dtype=np.int64)
+        missing = idx[classes[idx] < 0]
         if missing.size:
-            if self._tree is None:
-                from nbcalib.registration.orientation import kdtree
-
-                # non-finite points are dropped by the cost; they get class 0 and no neighbours
-                self._finite = np.flatnonzero(np.isfinite(pts).all(axis=1))
-                self._tree = kdtree(pts[self._finite]) if self._finite.size >= 3 else False
-            ok = np.isin(missing, self._finite) if self._tree is not False else missing < -1
-            self.classes[missing[~ok]] = 0
+            pts = np.asarray(self.points_lidar, dtype=np.float64)
+            tree = cloud.memo("tree", lambda: _Tree(pts))
+            ok = np.isin(missing, tree.finite) if tree.tree is not None else missing < -1
+            classes[missing[~ok]] = 0
             if ok.any():
                 normals = point_normals(
-                    pts[self._finite],
-                    indices=np.searchsorted(self._finite, missing[ok]),
-                    tree=self._tree,
+                    pts[tree.finite],
+                    indices=np.searchsorted(tree.finite, missing[ok]),
+                    tree=tree.tree,
                 )
-                self.classes[missing[ok]] = class_of_normals(normals)
-        return self.classes[idx]
+                classes[missing[ok]] = class_of_normals(normals)
+        return classes[idx]
 
 
 def visible_subset(
@@ -158,8 +224,6 @@ def visible_subset(
     ``select`` (optional) takes them in cloud order and returns the ones to keep, before they
     are sorted by pixel (:func:`~nbcalib.preprocess.lidar_image.visible_indices`).
     """
-    from nbcalib.preprocess.lidar_image import sorted_by_pixel
-
     if not config.hidden_point_removal:
         _, valid = pair.camera.project(
             pair.points_lidar @ T_camera_lidar[:3, :3].T + T_camera_lidar[:3, 3], in_image=True
@@ -168,7 +232,10 @@ def visible_subset(
         return keep if select is None else select(keep)
     # sorted by pixel: the cost then reads the image in order (1.3-2.6x cheaper evaluations)
     keep, pixel = pair.visibility(T_camera_lidar, config.depth_margin, config.window)
-    return sorted_by_pixel(keep, pixel, select)
+    if select is not None:  # a subset of keep, in its order: their pixels by position
+        chosen = select(keep)
+        pixel, keep = pixel[np.searchsorted(keep, chosen)], chosen
+    return keep[np.argsort(pixel, kind="stable")]
 
 
 def downscale_camera(camera: CameraModel, level: int) -> CameraModel:

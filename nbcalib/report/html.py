@@ -199,28 +199,31 @@ def _write_figures(folder: Path, quality, loaded, pairs, config, T, T_init, step
     for k, (work_pair, pair) in enumerate(zip(loaded, pairs)):
         if k >= MAX_PAIRS_DRAWN:
             break
-        # the result's visible set first: the report's cost has it already
-        result = visible_subset(pair, T, config)
-        poses = []
-        if T_init is not None:
-            poses.append(("initial guess", T_init, visible_subset(pair, T_init, config)))
-        poses.append(("result", T, result))
-        stem = _safe(pair.name or str(k))
-        edges = fg.lidar_edge_points(
-            work_pair.lidar_image.intensity, work_pair.lidar_index, pair.points_lidar
-        )
-        save(
-            f"alignment_{stem}.png",
-            fg.alignment(pair.camera, work_pair.image, pair.points_lidar, edges, T, result),
-        )
-        save(
-            f"overlay_{stem}.png",
-            fg.overlays(pair.camera, work_pair.image, pair.points_lidar, pair.intensities, poses),
-        )
-        save(
-            f"edges_{stem}.png",
-            fg.edge_overlay(pair.camera, work_pair.image, pair.points_lidar, edges, poses),
-        )
+        with pair.held():  # a cloud read from the work directory: once for its figures
+            # the result's visible set first: the report's cost has it already
+            result = visible_subset(pair, T, config)
+            poses = []
+            if T_init is not None:
+                poses.append(("initial guess", T_init, visible_subset(pair, T_init, config)))
+            poses.append(("result", T, result))
+            stem = _safe(pair.name or str(k))
+            edges = fg.lidar_edge_points(
+                work_pair.lidar_image.intensity, work_pair.lidar_index, pair.points_lidar
+            )
+            save(
+                f"alignment_{stem}.png",
+                fg.alignment(pair.camera, work_pair.image, pair.points_lidar, edges, T, result),
+            )
+            save(
+                f"overlay_{stem}.png",
+                fg.overlays(
+                    pair.camera, work_pair.image, pair.points_lidar, pair.intensities, poses
+                ),
+            )
+            save(
+                f"edges_{stem}.png",
+                fg.edge_overlay(pair.camera, work_pair.image, pair.points_lidar, edges, poses),
+            )
     return written
 
 

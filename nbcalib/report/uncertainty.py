@@ -36,9 +36,9 @@ def _pixels_covered(pair: RegistrationPair, T: np.ndarray, config: RefineConfig)
     """
     width, height = pair.camera.width, pair.camera.height
     if config.hidden_point_removal:
-        keep, pixel = pair.visibility(T, config.depth_margin, config.window)
+        _, pixel = pair.visibility(T, config.depth_margin, config.window)
         hit = np.zeros(width * height, dtype=bool)
-        hit[pixel[keep]] = True
+        hit[pixel] = True
         return int(np.count_nonzero(hit))
     keep = visible_subset(pair, T, config)
     if keep.size == 0:

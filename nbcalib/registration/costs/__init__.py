@@ -238,10 +238,12 @@ def build_cost(
     def pair_terms(pair):  # one pair's z-buffer, subset and terms: independent of the others
         offset = getattr(pair, "T_camera_rig", None)
         T = T_camera_lidar if offset is None else offset @ np.asarray(T_camera_lidar)
-        view = pair_view(pair, T, config, level=level, n_pairs=n_pairs)
-        terms = intensity(view, config)
-        if config.structure_weight > 0 and view.keep.size:
-            terms += [(t, w * config.structure_weight) for t, w in structure.terms(view, config)]
+        with pair.held():  # a cloud read from the work directory: once for all of this
+            view = pair_view(pair, T, config, level=level, n_pairs=n_pairs)
+            terms = intensity(view, config)
+            if config.structure_weight > 0 and view.keep.size:
+                weight = config.structure_weight
+                terms += [(t, w * weight) for t, w in structure.terms(view, config)]
         if offset is not None:
             terms = [(RigTerm(t, offset), w) for t, w in terms]
         return view.n_visible, terms

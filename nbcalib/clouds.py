@@ -1,0 +1,229 @@
+"""A pair's dense cloud: held in memory, or read again from the work directory when needed.
+
+A long recording's dense clouds do not fit in memory together: fifteen Livox pairs hold 33 M
+points, 1.1 GB as float64, and fine registration and the report compute as much again from
+them (visible sets, sample keys, KD-trees). So a pair does not own its cloud's arrays; it owns
+a :class:`Cloud`, which either
+
+- **holds** them (a job made in memory, the API given arrays, a test), or
+- **reads** them from the work directory's PLY each time they are needed (a job with a work
+  directory, once a pair is written), its size known from the file's header alone.
+
+Whatever is computed from a cloud and can be computed again (the file's float32 values, half
+the float64 arrays' size, the KD-tree, the sample keys, the visible sets) goes through
+:meth:`Cloud.memo`, which keeps it in the job's :class:`MemoryBudget` while the budget has room
+and otherwise hands it over without keeping it. Every such product is a deterministic function
+of the cloud, so what is kept changes the time a job takes, never a number it computes. A held
+cloud keeps its products without limit, as before the budget existed. The orientation classes
+of the points (:meth:`nbcalib.registration.pair.RegistrationPair.orientation_classes`) stay
+with the cloud: one byte per point, computed once.
+
+A stage that uses a read cloud several times in a row pins it (``with cloud.held():``), so that
+it is read once for that stretch and released after.
+"""
+
+from __future__ import annotations
+
+import threading
+from collections.abc import Callable, Hashable
+from contextlib import contextmanager
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["Cloud", "MemoryBudget", "nbytes"]
+
+
+def nbytes(value) -> int:
+    """Bytes of an array, or of a tuple or list of arrays (other items count 0)."""
+    if isinstance(value, np.ndarray):
+        return int(value.nbytes)
+    if isinstance(value, (tuple, list)):
+        return sum(nbytes(v) for v in value)
+    return int(getattr(value, "nbytes_estimate", 0))
+
+
+class MemoryBudget:
+    """What a job keeps of the products it can compute again, up to ``limit`` bytes.
+
+    A product that does not fit is handed over without being kept: nothing already kept is
+    pushed out for it. A job visits its pairs in turn at every step, so pushing out the oldest
+    would push out each pair's products just before they are asked for again; keeping the first
+    that fit serves those pairs from memory and reads the others, at a steady cost. Owners drop
+    what they no longer need (:meth:`drop`), which makes room again.
+
+    Parameters
+    ----------
+    limit : int or None
+        Bytes (None: no limit, everything is kept).
+    """
+
+    def __init__(self, limit: int | None):
+        if limit is not None and limit < 0:
+            raise ValueError(f"a memory budget is at least 0 bytes, got {limit}")
+        self.limit = limit
+        self.used = 0
+        self._items: dict[Hashable, tuple[object, int]] = {}
+        self._lock = threading.Lock()
+
+    def __repr__(self) -> str:
+        limit = "none" if self.limit is None else f"{self.limit / 2**20:.0f} MB"
+        return f"MemoryBudget({self.used / 2**20:.0f} MB of {limit}, {len(self._items)} items)"
+
+    def get(self, key: Hashable, make: Callable[[], object], *, share: float = 1.0) -> object:
+        """The product kept under ``key``, or ``make()`` (kept if it fits).
+
+        ``share``: kept only while the budget is used to at most this fraction of its limit,
+        so that the bulkiest products, the cheapest to make again, leave room for the others.
+        """
+        with self._lock:
+            found = self._items.get(key)
+        if found is not None:
+            return found[0]
+        value = make()
+        size = nbytes(value)
+        with self._lock:
+            room = None if self.limit is None else share * self.limit
+            if key not in self._items and (room is None or self.used + size <= room):
+                self._items[key] = (value, size)
+                self.used += size
+        return value
+
+    def drop(self, key: Hashable) -> None:
+        """Forget the product under ``key`` (nothing if none)."""
+        with self._lock:
+            found = self._items.pop(key, None)
+            if found is not None:
+                self.used -= found[1]
+
+
+def _read_ply_cloud(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """Points (N, 3) and intensities (N,) of a work directory's PLY, in the file's dtype.
+
+    The work directory stores float32: kept so, a cloud takes half the memory of the float64
+    arrays the stages use (:meth:`Cloud.arrays` converts, exactly).
+    """
+    from nbcalib.errors import InputError
+    from nbcalib.io.ply import read_ply_fields
+
+    fields = read_ply_fields(path)
+    missing = [k for k in ("x", "y", "z", "intensity") if k not in fields]
+    if missing:
+        raise InputError(f"the cloud lacks the vertex properties {missing}", path)
+    return np.column_stack([fields[k] for k in "xyz"]), np.asarray(fields["intensity"])
+
+
+class Cloud:
+    """A dense cloud and what is computed from it (module docstring).
+
+    Parameters
+    ----------
+    points : ndarray of shape (N, 3), optional
+        The points, held (give ``intensities`` with them).
+    intensities : ndarray of shape (N,), optional
+    path : path, optional
+        Instead of arrays: a PLY with ``x, y, z, intensity``, read when the arrays are asked
+        for (float64, the file's float32 values).
+    size : int, optional
+        With ``path``: its number of points (from its header).
+    budget : MemoryBudget, optional
+        With ``path``: where the products are kept (default: nothing is kept).
+    classes : ndarray of shape (N,), int8, optional
+        Orientation classes already known (-1: not yet).
+    """
+
+    def __init__(
+        self,
+        points=None,
+        intensities=None,
+        *,
+        path=None,
+        size: int | None = None,
+        budget: MemoryBudget | None = None,
+        classes=None,
+    ):
+        if (points is None) == (path is None):
+            raise ValueError("a cloud is given either its arrays or the path of its file")
+        if points is not None:
+            if intensities is None:
+                raise ValueError("a cloud's points need their intensities")
+            self._arrays: tuple | None = (points, intensities)
+            self.path = None
+            self.size = int(np.shape(points)[0])
+            self.budget = MemoryBudget(None)
+        else:
+            if size is None:
+                raise ValueError("a cloud read from a file needs its size")
+            self._arrays = None
+            self.path = Path(path)
+            self.size = int(size)
+            self.budget = budget if budget is not None else MemoryBudget(0)
+        self.classes = None if classes is None else np.asarray(classes, dtype=np.int8)
+        self._pins = 0
+        self._pinned: tuple | None = None
+        self._lock = threading.RLock()
+
+    def __repr__(self) -> str:
+        where = "held" if self.path is None else f"read from {self.path.name}"
+        return f"Cloud({self.size} points, {where})"
+
+    def __len__(self) -> int:
+        return self.size
+
+    @property
+    def held_in_memory(self) -> bool:
+        """Whether the arrays are held (not read from a file)."""
+        return self.path is None
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(points, intensities)``: held, pinned, kept in the budget, or read now."""
+        if self._arrays is not None:
+            return self._arrays
+        with self._lock:
+            if self._pinned is not None:
+                return self._pinned
+        # the file's values take at most 3/4 of the budget: what is computed from them costs
+        # more to make again than a read (a z-buffer, a KD-tree)
+        points, intensities = self.memo("file", lambda: _read_ply_cloud(self.path), share=0.75)
+        return points.astype(np.float64), intensities.astype(np.float64)
+
+    @property
+    def points(self) -> np.ndarray:
+        """The points (N, 3), LiDAR frame, metres."""
+        return self.arrays()[0]
+
+    @property
+    def intensities(self) -> np.ndarray:
+        """The intensities (N,), in [0, 1]."""
+        return self.arrays()[1]
+
+    @contextmanager
+    def held(self):
+        """Keep the arrays in memory while the block runs; yields ``(points, intensities)``."""
+        with self._lock:
+            if self._pins == 0 and self._arrays is None:
+                self._pinned = self.arrays()
+            self._pins += 1
+        try:
+            yield self.arrays()
+        finally:
+            with self._lock:
+                self._pins -= 1
+                if self._pins == 0:
+                    self._pinned = None
+
+    def memo(self, key: Hashable, make: Callable[[], object], *, share: float = 1.0) -> object:
+        """A product of this cloud: kept under ``key`` in the budget, or ``make()``."""
+        return self.budget.get((id(self), key), make, share=share)
+
+    def forget(self, key: Hashable) -> None:
+        """Drop a product of this cloud from the budget."""
+        self.budget.drop((id(self), key))
+
+    def __del__(self):  # a cloud's products go with it (an id is reused once freed)
+        budget = getattr(self, "budget", None)
+        if budget is not None and budget.limit != 0:
+            with budget._lock:
+                mine = [k for k in budget._items if isinstance(k, tuple) and k[0] == id(self)]
+            for k in mine:
+                budget.drop(k)
