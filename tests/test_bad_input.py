@@ -138,6 +138,51 @@ class Case:
     absent: tuple = ()  # keys of paths that must not exist afterwards (a folder not made)
     message: str = ""  # text the error must contain
     extra: dict = field(default_factory=dict)
+    during: object = None  # callable(paths) -> context manager around the command (a fault)
+
+
+@contextlib.contextmanager
+def _held_elsewhere(path: Path):
+    """The work directory's lock held by another process while the block runs."""
+    import subprocess
+    import sys
+    import textwrap
+
+    code = textwrap.dedent(
+        f"""
+        import time
+        from nbcalib.io.workdir_lock import workdir_lock
+        with workdir_lock({str(path)!r}):
+            print("held", flush=True)
+            time.sleep(600)
+        """
+    )
+    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout.readline().strip() == "held"
+        yield proc
+    finally:
+        proc.kill()
+        proc.wait(timeout=30)
+
+
+@contextlib.contextmanager
+def _full_disk():
+    """Every file written while the block runs fails as on a full disk (ENOSPC)."""
+    import errno
+
+    from nbcalib.io import _files
+
+    real = _files.os.fsync
+
+    def full(fd):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    _files.os.fsync = full
+    try:
+        yield
+    finally:
+        _files.os.fsync = real
 
 
 def _write(path: Path, data: bytes | str) -> Path:
@@ -204,13 +249,14 @@ def _camera_options_case(id, options, message, name):
 
 
 def _stage_case(id, command, extra=(), *, copy="finished", message="", name=None, status=2,
-                setup=None, read_only=()):  # fmt: skip
+                setup=None, read_only=(), during=None, names=None):  # fmt: skip
     def argv(p):
         extra_args = [a(p) if callable(a) else a for a in extra]
         return [command, str(p["work"]), *extra_args]
 
-    return Case(id, argv, names=name or (lambda p: p["work"].name), copy=copy, message=message,
-                status=status, setup=setup, read_only=read_only)  # fmt: skip
+    names = names or name or (lambda p: p["work"].name)
+    return Case(id, argv, names=names, copy=copy, message=message, status=status, setup=setup,
+                read_only=read_only, during=during)  # fmt: skip
 
 
 def _bag(p, fmt):
@@ -695,6 +741,44 @@ CASES = [
         names=lambda p: "afile",
         setup=lambda p: _write(p["tmp"] / "afile", "x"),
     ),
+    # ---- a work directory in use, a full disk (every stage and write: test_interrupts.py)
+    _stage_case(
+        "calibrate-workdir-in-use",
+        "calibrate",
+        ["--init", INIT, "--force"],
+        during=lambda p: _held_elsewhere(p["work"]),
+        message="in use by",
+    ),
+    _stage_case(
+        "run-workdir-in-use",
+        "run",
+        ["--force", "--no-matching", "--init", INIT],
+        during=lambda p: _held_elsewhere(p["work"]),
+        message="in use by",
+    ),
+    _stage_case(
+        "calibrate-full-disk",
+        "calibrate",
+        ["--init", INIT, "--force"],
+        during=lambda p: _full_disk(),
+        names=lambda p: "calib.json",
+        message="no space left on device",
+    ),
+    _stage_case(
+        "report-full-disk",
+        "report",
+        [],
+        during=lambda p: _full_disk(),
+        message="no space left on device",
+    ),
+    Case(
+        "preprocess-full-disk",
+        lambda p: ["preprocess", *_plain(p["inputs"]), str(p["tmp"] / "w")],
+        names=lambda p: "w",
+        during=lambda p: _full_disk(),
+        message="no space left on device",
+        absent=("w",),
+    ),
     # ---- config files and run options
     Case(
         "run-config-missing",
@@ -894,11 +978,12 @@ def test_bad_input(case: Case, base, tmp_path_factory, capsys):
         case.setup(paths)
     argv = case.argv(paths)
     watched = [paths["inputs"], tmp]
-    before = {str(w): _digest(w) for w in watched}
     read_only = [paths[k] for k in case.read_only]
     capsys.readouterr()
-    with _as_unprivileged(read_only) if read_only else contextlib.nullcontext():
-        status = main(argv)
+    with case.during(paths) if case.during else contextlib.nullcontext():
+        before = {str(w): _digest(w) for w in watched}
+        with _as_unprivileged(read_only) if read_only else contextlib.nullcontext():
+            status = main(argv)
     err = capsys.readouterr().err
     assert "Traceback" not in err, err
     assert status == case.status, err

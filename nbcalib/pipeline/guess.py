@@ -189,7 +189,9 @@ class GuessSteps:
         self._forget_after("initial-guess")
         calib = self._calib()
         if calib is not None:
-            calib.set_T_camera_lidar(stage, self.start.T_camera_lidar)
+            # the start's own seven numbers (values of the guess's matrix), so that a job
+            # resumed from calib.json starts where this one starts, to the bit
+            calib.set_T_camera_lidar(stage, guess.T_camera_lidar)
             calib.record.guess().stages[stage] = GuessFigures.make(
                 correspondences=len(corr),
                 ransac_inliers=guess.ransac.n_inliers,

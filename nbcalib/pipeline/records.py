@@ -70,8 +70,9 @@ class JobRecords:
                     _uncertainty_from_record(info.start_uncertainty),
                 )
             stage = calib.latest_initial_stage()
-            if stage is not None:
-                return Start.from_matrix(calib.get_T_camera_lidar(stage), stage)
+            if stage is not None:  # its seven stored numbers: a resumed job starts to the bit
+                calib.get_T_camera_lidar(stage)  # (checked)
+                return Start.from_values(calib.results[stage], stage)
         if self._fallback is not None:
             return self._fallback
         if not required:
@@ -148,7 +149,6 @@ class JobRecords:
         calib = self._calib() if self.store.is_complete() else None
         if calib is None or stage == "report":
             return
-        self.store.remove_derived()
         for name in later:
             calib.record.forget_made(name)
         stale = {"find-matches": (AUTO_STAGE, FINAL_STAGE), "initial-guess": (FINAL_STAGE,)}
@@ -161,6 +161,8 @@ class JobRecords:
             calib.record.calibration = None
         calib.record.quality = None
         self.store.write_calib(calib)
+        # after the record that no longer has them: a full disk leaves both as they were
+        self.store.remove_derived()
 
 
 def _plain(value):
