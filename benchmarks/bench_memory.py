@@ -1,16 +1,22 @@
-"""Peak resident memory of ``nbcalib run`` against the number of pairs (issue 48).
+"""Peak resident memory of ``nbcalib run`` against the number of pairs and the recording's length.
 
-Per pair count: ``nbcalib synth OUT --lidar livox --camera pinhole --pairs N --format bag2``
-(one ROS 2 bag per pair), then ``nbcalib run OUT/pair_* WORK --no-matching --init START`` as a
-user types it (``START`` 1 deg / 5 cm from the truth, seeded), under ``/usr/bin/time``: its peak
-resident set (the run's own process; numba threads included), its wall time, and the result's
+Issue 48. Each case runs ``nbcalib run`` as a user types it, under ``/usr/bin/time``: its peak
+resident set (the run's own process, numba threads included), its wall time, and the result's
 error (``nbcalib evaluate``), so that a change that bounds memory can be shown not to move the
-result.
+result. With ``--base COMMIT`` every case also runs with the nbcalib of that commit (a git
+worktree), one after the other on the same data: the two results must be equal to the digit.
+
+- ``--pairs 1,15,50``: ``nbcalib synth OUT --lidar livox --camera pinhole --pairs N --format
+  bag2`` (one ROS 2 bag per pair), then ``nbcalib run OUT/pair_* WORK --no-matching --init
+  START`` (``START`` 1 deg / 5 cm from the truth, seeded).
+- ``--recording 1,10``: a recording of that many minutes of a spinning LiDAR (spinning64 at
+  10 Hz, an image a second, the rig at rest in a room: one second of ``nbcalib synth``'s
+  simulation written again every second, so 10 minutes are 6000 scans and 600 images in one
+  ROS 2 bag, 9 GB), then ``nbcalib run BAG WORK --pair-count 20 --no-matching --init START``.
 
 Run one at a time on an idle machine:
 
-    python benchmarks/bench_memory.py --pairs 1,15          # BENCHMARKS (issue 48)
-    python benchmarks/bench_memory.py --pairs 15,50 --keep DIR    # keep and reuse the data
+    python benchmarks/bench_memory.py --pairs 1,15,50 --recording 1,10 --base a03eaf4 --keep DIR
 
 Prints a Markdown table and one JSON line.
 """
@@ -19,6 +25,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import shutil
 import subprocess
 import sys
@@ -32,13 +39,19 @@ from nbcalib.transforms import invert_T, offset_pose, pose_to_xyz_quat
 #: Seed of the start's direction.
 START_SEED = 48
 
+ROOT = Path(__file__).resolve().parents[1]
 
-def nbcalib(*args, timed: bool = False) -> tuple[subprocess.CompletedProcess, float | None]:
-    """Run ``nbcalib ARGS``; with ``timed``, under ``/usr/bin/time`` (peak RSS in MB)."""
+
+def nbcalib(*args, timed: bool = False, code: Path | None = None):
+    """Run ``nbcalib ARGS`` (with the nbcalib of folder ``code``); with ``timed``, under
+    ``/usr/bin/time``: returns the run and its peak RSS in MB."""
     cmd = [sys.executable, "-m", "nbcalib", *map(str, args)]
     if timed:
         cmd = ["/usr/bin/time", "-f", "MAXRSS_KB %M", *cmd]
-    run = subprocess.run(cmd, capture_output=True, text=True)
+    env = dict(os.environ)
+    if code is not None:
+        env["PYTHONPATH"] = str(code)
+    run = subprocess.run(cmd, capture_output=True, text=True, env=env)
     if run.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)}:\n{run.stderr[-2000:]}")
     peak = None
@@ -48,48 +61,130 @@ def nbcalib(*args, timed: bool = False) -> tuple[subprocess.CompletedProcess, fl
     return run, peak
 
 
-def case(pairs: int, args, root: Path) -> dict:
-    out, work = root / f"synth_{pairs}", root / f"work_{pairs}"
+def start_of(gt: Path) -> str:
+    """``--init``: the truth moved 1 deg / 5 cm (seeded)."""
+    start = offset_pose(read_ground_truth(gt), 1.0, 0.05, START_SEED)
+    return ",".join(f"{v:.12g}" for v in pose_to_xyz_quat(invert_T(start)))
+
+
+def measure(label: str, inputs: list, extra: list, gt: Path, root: Path, codes: dict) -> list:
+    """``nbcalib run INPUTS WORK EXTRA`` with each nbcalib of ``codes``: one row each."""
+    rows = []
+    for version, code in codes.items():
+        work = root / f"work_{label}_{version}"
+        shutil.rmtree(work, ignore_errors=True)
+        t0 = time.perf_counter()
+        _, peak = nbcalib("run", *inputs, work, *extra, timed=True, code=code)
+        wall = time.perf_counter() - t0
+        ev, _ = nbcalib("evaluate", work, "--ground-truth", gt)
+        errors = json.loads(ev.stdout.splitlines()[-1])
+        result = json.loads((work / "calib.json").read_text())["results"]["T_lidar_camera"]
+        row = {
+            "case": label,
+            "version": version,
+            "peak_mb": round(peak, 1),
+            "wall_s": round(wall, 1),
+            "cm": round(100 * errors["translation_error_m"], 4),
+            "deg": round(errors["rotation_error_deg"], 5),
+            "result": result,
+        }
+        print(f"{label} ({version}): {row}", file=sys.stderr, flush=True)
+        rows.append(row)
+        shutil.rmtree(work, ignore_errors=True)
+    return rows
+
+
+def pairs_case(pairs: int, args, root: Path, codes: dict) -> list:
+    out = root / f"synth_{pairs}"
     if not (out / "ground_truth.json").is_file():
         shutil.rmtree(out, ignore_errors=True)
         nbcalib("synth", out, "--lidar", args.lidar, "--camera", args.camera, "--pairs", pairs,
                 "--seed", args.seed, "--format", "bag2")  # fmt: skip
     gt = out / "ground_truth.json"
-    start = offset_pose(read_ground_truth(gt), 1.0, 0.05, START_SEED)
-    init = ",".join(f"{v:.12g}" for v in pose_to_xyz_quat(invert_T(start)))
-    shutil.rmtree(work, ignore_errors=True)
-    bags = sorted(out.glob("pair_*"))
-    t0 = time.perf_counter()
-    _, peak = nbcalib("run", *bags, work, "--no-matching", f"--init={init}", timed=True)
-    wall = time.perf_counter() - t0
-    ev, _ = nbcalib("evaluate", work, "--ground-truth", gt)
-    errors = json.loads(ev.stdout.splitlines()[-1])
-    row = {
-        "pairs": pairs,
-        "peak_mb": round(peak, 1),
-        "wall_s": round(wall, 1),
-        "cm": round(100 * errors["translation_error_m"], 4),
-        "deg": round(errors["rotation_error_deg"], 5),
-    }
-    print(f"{pairs} pairs: {row}", file=sys.stderr, flush=True)
-    return row
+    extra = ["--no-matching", f"--init={start_of(gt)}"]
+    return measure(f"{pairs} pairs", sorted(out.glob("pair_*")), extra, gt, root, codes)
+
+
+def write_recording(out: Path, minutes: float, seed: int) -> Path:
+    """A recording of a spinning LiDAR at rest: one simulated second written again and again."""
+    from nbcalib.io.bag_writer import BagWriter
+    from nbcalib.io.ground_truth import write_ground_truth
+    from nbcalib.synthetic import RigConfig
+    from nbcalib.synthetic.rig import generate_sequence
+    from nbcalib.synthetic.writer import BASE_STAMP_NS, FRAMES, TOPICS, scan_fields
+
+    config = RigConfig(lidar="spinning64", camera="pinhole", scene="room", seed=seed,
+                       duration=1.0, motion="static")  # fmt: skip
+    sequence = generate_sequence(config, pair=0)
+    scans = sequence.output_scans()
+    period = 1.0 / len(scans)  # 10 scans a second
+    out.mkdir(parents=True, exist_ok=True)
+    bag = out / "recording"
+    shutil.rmtree(bag, ignore_errors=True)
+    with BagWriter(bag, "bag2") as writer:
+        writer.write_tf_static(BASE_STAMP_NS, FRAMES["lidar"], FRAMES["camera"],
+                               sequence.T_lidar_camera)  # fmt: skip
+        writer.write_camera_info(TOPICS["camera_info"], BASE_STAMP_NS, sequence.camera,
+                                 FRAMES["camera"])  # fmt: skip
+        for second in range(round(60 * minutes)):
+            stamp = BASE_STAMP_NS + second * 1_000_000_000
+            writer.write_image(TOPICS["image"], stamp, sequence.image, FRAMES["camera"])
+            for k, scan in enumerate(scans):
+                at = stamp + round(k * period * 1e9)
+                writer.write_pointcloud(TOPICS["points"], at, scan_fields(scan), FRAMES["lidar"])
+    write_ground_truth(out / "ground_truth.json", sequence.T_camera_lidar)
+    return bag
+
+
+def recording_case(minutes: float, args, root: Path, codes: dict) -> list:
+    out = root / f"recording_{minutes:g}min"
+    if not (out / "ground_truth.json").is_file():
+        shutil.rmtree(out, ignore_errors=True)
+        write_recording(out, minutes, args.seed)
+    gt = out / "ground_truth.json"
+    extra = ["--pair-count", "20", "--no-matching", f"--init={start_of(gt)}"]
+    return measure(f"{minutes:g} min", [out / "recording"], extra, gt, root, codes)
 
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawTextHelpFormatter)
-    ap.add_argument("--pairs", default="1,15", help="pair counts, comma-separated")
+    ap.add_argument("--pairs", default="1,15", help="pair counts, comma-separated ('': none)")
+    ap.add_argument("--recording", default="", help="recording lengths, minutes, comma-separated")
+    ap.add_argument("--base", help="also run each case with the nbcalib of this commit")
     ap.add_argument("--lidar", default="livox")
     ap.add_argument("--camera", default="pinhole")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--keep", type=Path, help="keep the data here (and reuse it)")
     args = ap.parse_args(argv)
     root = args.keep or Path(tempfile.mkdtemp(prefix="nbcalib_memory_"))
-    rows = [case(int(n), args, root) for n in args.pairs.split(",")]
-    print("| pairs | peak RSS, MB | wall s | result cm / deg |")
-    print("|---|---|---|---|")
+    codes: dict = {"head": ROOT}
+    base_code = root / "base_code"
+    if args.base:
+        if not base_code.exists():
+            add = ["git", "-C", str(ROOT), "worktree", "add", "--detach", "-f", str(base_code)]
+            subprocess.run([*add, args.base], check=True, capture_output=True)
+        codes = {"base": base_code, **codes}
+    rows = []
+    try:
+        for n in filter(None, args.pairs.split(",")):
+            rows += pairs_case(int(n), args, root, codes)
+        for m in filter(None, args.recording.split(",")):
+            rows += recording_case(float(m), args, root, codes)
+    finally:
+        if args.base:
+            subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force",
+                            str(base_code)], capture_output=True)  # fmt: skip
+    print("| case | version | peak RSS, MB | wall s | result cm / deg |")
+    print("|---|---|---|---|---|")
     for r in rows:
         result = f"{r['cm']:.2f} / {r['deg']:.3f}"
-        print(f"| {r['pairs']} | {r['peak_mb']:.0f} | {r['wall_s']} | {result} |")
+        print(f"| {r['case']} | {r['version']} | {r['peak_mb']:.0f} | {r['wall_s']} | {result} |")
+    same = {}
+    for r in rows:
+        same.setdefault(r["case"], set()).add(tuple(r["result"]))
+    for case, results in same.items():
+        if len(results) > 1:
+            print(f"{case}: the versions' results differ", file=sys.stderr)
     print(
         json.dumps({"bench": "memory", "args": vars(args) | {"keep": str(args.keep)}, "rows": rows})
     )

@@ -27,6 +27,7 @@ JOB = ["--matcher", "sift", "--max-outer", "2", "--pyramid-levels", "0"]
 #: job's options.
 STAGES = {
     "preprocess": lambda inputs, work: ["preprocess", *_plain(inputs), str(work)],
+    "preprocess-again": lambda inputs, work: ["preprocess", *_plain(inputs), str(work), "--force"],
     "find-matches": lambda inputs, work: ["find-matches", str(work), "--force", *JOB[:2]],
     "initial-guess": lambda inputs, work: ["initial-guess", str(work), "--force"],
     "calibrate": lambda inputs, work: ["calibrate", str(work), "--force", *JOB[2:]],
@@ -66,11 +67,15 @@ def _copy(job, stage, tmp_path):
     return work
 
 
+def _contents(work) -> dict:
+    return {p.relative_to(work): p.read_bytes() for p in sorted(work.rglob("*")) if p.is_file()}
+
+
 def _resume(job, stage, work, capsys):
     """Run the job again after a stop: ``run WORKDIR`` (after preprocessing: the job's command,
     which goes on from what was kept)."""
     capsys.readouterr()
-    if stage != "preprocess":
+    if not stage.startswith("preprocess"):
         assert main(["-q", "run", str(work)]) == 0, capsys.readouterr().err
     else:  # a preprocess command alone knows nothing of the job: the job's own command
         assert main(["-q", "run", *_plain(job["inputs"]), str(work), *JOB]) == 0
@@ -109,7 +114,7 @@ def test_a_full_disk_at_every_write(stage, job, tmp_path, monkeypatch, capsys):
     assert count >= 2, count  # the products and calib.json at least
     for k in range(1, count + 1):
         work = _copy(job, stage, tmp_path / str(k))
-        before = _result(work)
+        before, files = _result(work), _contents(work)
         seen = []
 
         def full(fd, k=k, seen=seen):
@@ -125,6 +130,8 @@ def test_a_full_disk_at_every_write(stage, job, tmp_path, monkeypatch, capsys):
         assert "no space left on device" in err[0] and str(work) in err[0], (k, err)
         assert ".tmp" not in err[0], err
         _check_stopped(job, work, before, err)
+        if stage == "preprocess-again":  # a rerun is staged: the job as it was, every byte
+            assert _contents(work) == files, k
         if k in (1, count):  # the first and the last write: the job finishes afterwards
             _resume(job, stage, work, capsys)
 
@@ -167,3 +174,22 @@ def test_an_interrupt_in_every_stage(stage, signal, job, tmp_path, monkeypatch, 
         assert stage not in made, made  # the stopped stage left no record
         assert main(["-q", "run", str(work)]) == 0, capsys.readouterr().err
     assert _result(work) == job["result"]  # to the last digit
+
+
+@pytest.mark.parametrize("signal", ["ctrl-c", "sigterm"])
+def test_an_interrupted_rerun_of_preprocessing_keeps_the_job(signal, job, tmp_path, monkeypatch):
+    """``preprocess --force`` over a finished job, stopped while it works: the job, its result
+    and its report as they were, every byte (the rerun is staged until complete)."""
+    import importlib
+
+    work = _copy(job, "preprocess-again", tmp_path)
+    files = _contents(work)
+    module, name = WORK["preprocess"]
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt if signal == "ctrl-c" else Terminated()
+
+    monkeypatch.setattr(importlib.import_module(module), name, interrupted)
+    status = main(["-q", *STAGES["preprocess-again"](job["inputs"], work)])
+    assert status == (130 if signal == "ctrl-c" else 143)
+    assert _contents(work) == files

@@ -185,8 +185,13 @@ class Calibrator(GuessSteps, JobRecords):
         if stage == "preprocess":
             # III-C: scans -> dense cloud per pair; equalised intensities and image;
             # III-D: one virtual camera renders every cloud: LiDAR image + index map
-            self._preprocess()
-            self._write_preprocess_record()
+            try:
+                self._preprocess()
+                self._write_preprocess_record()
+                self.store.commit()  # a rerun replaces the job it reran only now
+            except BaseException:
+                self.store.abort()
+                raise
         elif stage == "find-matches":
             # III-D: camera image x camera-shaped LiDAR views -> 2D-3D correspondences
             self._match()

@@ -46,6 +46,12 @@ class MemoryStore:
     def prepare(self) -> None:
         """Make room for a new preprocessing run, removing what it makes stale."""
 
+    def commit(self) -> None:
+        """A preprocessing run is complete (nothing to move in memory)."""
+
+    def abort(self) -> None:
+        """A preprocessing run failed (nothing to remove in memory)."""
+
     def read_calib(self):
         """The job's records and results (``calib.json``); None when none are kept."""
         return None
@@ -94,8 +100,12 @@ class MemoryStore:
 class WorkDirStore:
     """The products of a job in its work directory (:class:`~nbcalib.workdir.WorkDir`)."""
 
+    #: Where a rerun of preprocessing writes, inside the work directory, until it is complete.
+    STAGING = ".nbcalib-preprocess"
+
     def __init__(self, work: WorkDir):
         self.work = work
+        self._final: WorkDir | None = None  # the work directory while a rerun is staged
 
     def __repr__(self) -> str:
         return f"WorkDirStore({str(self.work.path)!r})"
@@ -103,7 +113,7 @@ class WorkDirStore:
     @property
     def path(self) -> Path:
         """The work directory."""
-        return self.work.path
+        return (self._final or self.work).path
 
     @property
     def calib_path(self) -> Path:
@@ -118,11 +128,60 @@ class WorkDirStore:
         """Hold the work directory's lock: one job at a time (:mod:`nbcalib.io.workdir_lock`)."""
         from nbcalib.io.workdir_lock import workdir_lock
 
-        return workdir_lock(self.work.path)
+        return workdir_lock(self.path)
 
     def prepare(self) -> None:
-        """Make room for a new preprocessing run, removing what it makes stale."""
-        self.work.prepare()
+        """Make room for a new preprocessing run.
+
+        In a new work directory the run writes in place. Over a job that has records (a rerun,
+        ``--force``) it writes into :attr:`STAGING` inside it, so that a run that fails (a full
+        disk, an interrupt, bad input found late) leaves the job, its result and its report
+        as they were; :meth:`commit` then puts the new products in place, :meth:`abort`
+        removes them.
+        """
+        if self._final is not None:
+            self.abort()
+        if not self.work.calib_path.is_file():
+            self.work.prepare()
+            return
+        import shutil
+
+        staging = WorkDir(self.work.path / self.STAGING)
+        shutil.rmtree(staging.path, ignore_errors=True)
+        staging.prepare()
+        self._final, self.work = self.work, staging
+
+    def commit(self) -> None:
+        """A staged preprocessing run replaces the job it reran (``calib.json`` last).
+
+        The old ``calib.json`` goes first: should the moves stop half-way, no result stands
+        beside products it was not computed from. Moves within one file system take no room.
+        """
+        if self._final is None:
+            return
+        import os
+
+        staging, final = self.work, self._final
+        final.calib_path.unlink(missing_ok=True)
+        final.remove_derived()
+        for name in staging.names():
+            for stale in final.match_paths(name):  # matches of the old LiDAR image
+                stale.unlink(missing_ok=True)
+        for path in sorted(staging.path.iterdir()):
+            if path.name != staging.calib_path.name:
+                os.replace(path, final.path / path.name)
+        os.replace(staging.calib_path, final.calib_path)
+        staging.path.rmdir()
+        self.work, self._final = final, None
+
+    def abort(self) -> None:
+        """Remove a staged preprocessing run that did not finish; the job is as it was."""
+        if self._final is None:
+            return
+        import shutil
+
+        shutil.rmtree(self.work.path, ignore_errors=True)
+        self.work, self._final = self._final, None
 
     def read_calib(self):
         """The job's records and results (``calib.json``); None when none are kept."""
@@ -169,8 +228,10 @@ class WorkDirStore:
             return pair
         from nbcalib.workdir import StoredLidarImage
 
-        cloud = Cloud(path=self.work.cloud_path(pair.name), size=len(pair), budget=budget)
-        return replace(pair, cloud=cloud, lidar_image=StoredLidarImage(self.work, pair.name))
+        # where the files will be once the run is complete (staged: after commit)
+        work = self._final or self.work
+        cloud = Cloud(path=work.cloud_path(pair.name), size=len(pair), budget=budget)
+        return replace(pair, cloud=cloud, lidar_image=StoredLidarImage(work, pair.name))
 
     def write_matches(self, found, pair, *, draw: bool) -> None:
         """Keep one pair's matches and correspondences (and their picture)."""
