@@ -14,6 +14,7 @@ worktree), one after the other on the same data: the two results must be equal t
   simulation written again every second, so 10 minutes are 6000 scans and 600 images in one
   ROS 2 bag, 9 GB), then ``nbcalib run BAG WORK --pair-count 20 --no-matching --init START``.
 
+Each version first runs one short job, not measured, so that numba has compiled its kernels.
 Run one at a time on an idle machine:
 
     python benchmarks/bench_memory.py --pairs 1,15,50 --recording 1,10 --base a03eaf4 --keep DIR
@@ -51,7 +52,8 @@ def nbcalib(*args, timed: bool = False, code: Path | None = None):
     env = dict(os.environ)
     if code is not None:
         env["PYTHONPATH"] = str(code)
-    run = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    # not from the checkout: `python -m` puts the working folder first on the import path
+    run = subprocess.run(cmd, capture_output=True, text=True, env=env, cwd=tempfile.gettempdir())
     if run.returncode != 0:
         raise RuntimeError(f"{' '.join(cmd)}:\n{run.stderr[-2000:]}")
     peak = None
@@ -92,6 +94,21 @@ def measure(label: str, inputs: list, extra: list, gt: Path, root: Path, codes: 
         rows.append(row)
         shutil.rmtree(work, ignore_errors=True)
     return rows
+
+
+def warm_up(args, root: Path, codes: dict) -> None:
+    """One short job per version, not measured: numba compiles each checkout's kernels once."""
+    out = root / "synth_1"
+    if not (out / "ground_truth.json").is_file():
+        shutil.rmtree(out, ignore_errors=True)
+        nbcalib("synth", out, "--lidar", args.lidar, "--camera", args.camera, "--pairs", 1,
+                "--seed", args.seed, "--format", "bag2")  # fmt: skip
+    init = f"--init={start_of(out / 'ground_truth.json')}"
+    for version, code in codes.items():
+        work = root / f"warm_{version}"
+        shutil.rmtree(work, ignore_errors=True)
+        nbcalib("run", out / "pair_000", work, "--no-matching", init, "--max-outer", 1, code=code)
+        shutil.rmtree(work, ignore_errors=True)
 
 
 def pairs_case(pairs: int, args, root: Path, codes: dict) -> list:
@@ -156,7 +173,7 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--keep", type=Path, help="keep the data here (and reuse it)")
     args = ap.parse_args(argv)
-    root = args.keep or Path(tempfile.mkdtemp(prefix="nbcalib_memory_"))
+    root = (args.keep or Path(tempfile.mkdtemp(prefix="nbcalib_memory_"))).resolve()
     codes: dict = {"head": ROOT}
     base_code = root / "base_code"
     if args.base:
@@ -164,8 +181,16 @@ def main(argv=None) -> int:
             add = ["git", "-C", str(ROOT), "worktree", "add", "--detach", "-f", str(base_code)]
             subprocess.run([*add, args.base], check=True, capture_output=True)
         codes = {"base": base_code, **codes}
+    for version, code in codes.items():  # each version runs its own nbcalib
+        probe = [sys.executable, "-c", "import nbcalib; print(nbcalib.__file__)"]
+        env = {**os.environ, "PYTHONPATH": str(code)}
+        where = subprocess.run(probe, capture_output=True, text=True, env=env,
+                               cwd=tempfile.gettempdir()).stdout.strip()  # fmt: skip
+        if not Path(where).resolve().is_relative_to(Path(code).resolve()):
+            raise SystemExit(f"{version}: nbcalib imported from {where}, not {code}")
     rows = []
     try:
+        warm_up(args, root, codes)
         for n in filter(None, args.pairs.split(",")):
             rows += pairs_case(int(n), args, root, codes)
         for m in filter(None, args.recording.split(",")):

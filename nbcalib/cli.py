@@ -189,9 +189,6 @@ def _terminate(signum, frame):
 
 def main(argv: list[str] | None = None) -> int:
     """Run the command line; returns the exit status."""
-    from nbcalib._malloc import return_freed_arrays
-
-    return_freed_arrays()  # a long job's memory stays bounded (nbcalib._malloc)
     in_main = threading.current_thread() is threading.main_thread()
     previous = signal.signal(signal.SIGTERM, _terminate) if in_main else None
     try:

@@ -159,6 +159,8 @@ class Cloud:
             self.size = int(size)
             self.budget = budget if budget is not None else MemoryBudget(0)
         self.classes = None if classes is None else np.asarray(classes, dtype=np.int8)
+        #: The keys of the visible sets kept, the last asked last (a pair keeps two).
+        self.visible_keys: list = []
         self._pins = 0
         self._pinned: tuple | None = None
         self._lock = threading.RLock()

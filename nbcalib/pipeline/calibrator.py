@@ -248,6 +248,7 @@ class Calibrator(GuessSteps, JobRecords):
 
         one = len(pending) == 1
         chosen = threading.Event()
+        self._memory(len(pending))
 
         def prepare(k: int):  # pairs on every core (nbcalib._threads); a bar only for one pair
             pair, pending[k] = pending[k], None  # let go of the inputs once prepared
@@ -553,11 +554,20 @@ class Calibrator(GuessSteps, JobRecords):
     def _pairs(self) -> list:
         if self.pairs is None:
             self.pairs = self.store.load_pairs(budget=self._memory())
+            self._memory(len(self.pairs))
         return self.pairs
 
-    def _memory(self):
-        """The job's :class:`~nbcalib.clouds.MemoryBudget` for its dense clouds (one per job)."""
+    def _memory(self, n_pairs: int = 0):
+        """The job's :class:`~nbcalib.clouds.MemoryBudget` for its dense clouds (one per job).
+
+        A job of ``n_pairs`` >= :data:`~nbcalib._malloc.MANY_PAIRS` also has the arrays it
+        frees go back to the system (:mod:`nbcalib._malloc`).
+        """
+        from nbcalib._malloc import MANY_PAIRS, return_freed_arrays
         from nbcalib.clouds import MemoryBudget
+
+        if n_pairs >= MANY_PAIRS:
+            return_freed_arrays()
 
         if self._budget is None:
             mb = self.config.refine.cloud_memory_mb

@@ -152,8 +152,8 @@ class RegistrationPair:
             cloud.forget(key)
             entry = cloud.memo(key, make)
         with cloud._lock:
-            asked = [k for k in getattr(cloud, "_visible_keys", []) if k != key] + [key]
-            cloud._visible_keys = asked[-2:]
+            asked = [k for k in cloud.visible_keys if k != key] + [key]
+            cloud.visible_keys = asked[-2:]
         for old in asked[:-2]:
             cloud.forget(old)
         return entry[1].astype(np.int64), entry[2].astype(np.int64)
