@@ -165,6 +165,26 @@ class Cloud:
         self._pinned: tuple | None = None
         self._lock = threading.RLock()
 
+    @classmethod
+    def given(cls, cloud=None, points=None, intensities=None, classes=None) -> Cloud:
+        """The cloud a pair is made with: ``cloud``, or new arrays held.
+
+        Arrays make a new cloud, the missing one taken from ``cloud`` (as
+        ``dataclasses.replace(pair, points_lidar=...)`` passes the old cloud along).
+        """
+        if points is None and intensities is None:
+            if cloud is None:
+                raise ValueError("a pair needs its points and intensities, or a cloud")
+            if classes is not None:
+                cloud.classes = np.asarray(classes, dtype=np.int8)
+            return cloud
+        if cloud is not None:
+            points = cloud.points if points is None else points
+            intensities = cloud.intensities if intensities is None else intensities
+        if points is None or intensities is None:
+            raise ValueError("a pair needs its points and intensities, or a cloud")
+        return cls(points, intensities, classes=classes)
+
     def __repr__(self) -> str:
         where = "held" if self.path is None else f"read from {self.path.name}"
         return f"Cloud({self.size} points, {where})"

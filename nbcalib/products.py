@@ -117,14 +117,7 @@ class PairData:
         *,
         cloud: Cloud | None = None,
     ):
-        if points_lidar is not None or intensities is not None:
-            # arrays make a new cloud (``replace(pair, points_lidar=...)`` with the old one)
-            if cloud is not None:
-                points_lidar = cloud.points if points_lidar is None else points_lidar
-                intensities = cloud.intensities if intensities is None else intensities
-            cloud = Cloud(points_lidar, intensities)
-        elif cloud is None:
-            raise ValueError("a pair needs its points and intensities, or a cloud")
+        cloud = Cloud.given(cloud, points_lidar, intensities)
         for key, value in (
             ("name", name),
             ("image", image),

@@ -50,10 +50,11 @@ def write_text_atomic(path, text: str) -> None:
     write_bytes_atomic(path, [text.encode("utf-8")])
 
 
-def read_bytes(path: Path) -> bytes:
-    """The whole file; a missing, unreadable or empty file is an InputError naming it."""
+def read_bytes(path: Path, limit: int | None = None) -> bytes:
+    """The whole file (its first ``limit`` bytes); missing, unreadable or empty: an InputError."""
     try:
-        data = path.read_bytes()
+        with open(path, "rb") as stream:
+            data = stream.read(-1 if limit is None else limit)
     except FileNotFoundError:
         raise InputError("file not found", path=path) from None
     except IsADirectoryError:

@@ -84,20 +84,16 @@ def _parse_ply_header(data: bytes, path: Path) -> tuple[str, list[_PlyElement], 
     return fmt, elements, offset
 
 
-def _read_head(path: Path) -> bytes:
-    """The first 64 KB of a file (a PLY header fits), as :func:`read_bytes` names errors."""
-    try:
-        with open(path, "rb") as stream:
-            head = stream.read(1 << 16)
-    except FileNotFoundError:
-        raise InputError("file not found", path=path) from None
-    except IsADirectoryError:
-        raise InputError("is a directory, expected a file", path=path) from None
-    except OSError as exc:
-        raise InputError(f"cannot read: {exc.strerror}", path=path) from None
-    if not head:
-        raise InputError("empty file", path=path)
-    return head
+def _vertex_dtype(vertex: _PlyElement, byte_order: str, path: Path) -> np.dtype:
+    """The vertex element's row dtype; its list properties, none or duplicates refused."""
+    if vertex.has_list:
+        raise InputError("vertex element with list properties is not supported", path=path)
+    names = [name for name, _ in vertex.properties]
+    if not names:
+        raise InputError("vertex element without properties", path=path)
+    if len(set(names)) != len(names):
+        raise InputError(f"duplicate vertex properties: {' '.join(names)}", path=path)
+    return np.dtype([(name, byte_order + code) for name, code in vertex.properties])
 
 
 def _vertex_layout(path: Path):
@@ -106,22 +102,14 @@ def _vertex_layout(path: Path):
     Checks what :func:`read_ply_fields` checks of such a file, and that the file holds its
     vertices.
     """
-    head = _read_head(path)
+    head = read_bytes(path, 1 << 16)  # a PLY header fits
     if b"end_header" not in head:
         return None  # a header past 64 KB: the whole file is parsed
     fmt, elements, offset = _parse_ply_header(head, path)
     if fmt == "ascii" or not elements or elements[0].name != "vertex":
         return None
     vertex = elements[0]
-    if vertex.has_list:
-        raise InputError("vertex element with list properties is not supported", path=path)
-    names = [name for name, _ in vertex.properties]
-    if not names:
-        raise InputError("vertex element without properties", path=path)
-    if len(set(names)) != len(names):
-        raise InputError(f"duplicate vertex properties: {' '.join(names)}", path=path)
-    byte_order = _PLY_FORMATS[fmt]
-    dtype = np.dtype([(name, byte_order + code) for name, code in vertex.properties])
+    dtype = _vertex_dtype(vertex, _PLY_FORMATS[fmt], path)
     held = max(path.stat().st_size - offset, 0) // dtype.itemsize
     if held < vertex.count:
         raise InputError(f"expected {vertex.count} vertices, file holds {held}", path=path)
@@ -181,15 +169,8 @@ def read_ply_fields(path) -> dict[str, np.ndarray]:
             skip_rows += element.count
     else:
         raise InputError("no 'vertex' element", path=path)
-    if element.has_list:
-        raise InputError("vertex element with list properties is not supported", path=path)
-    names = [name for name, _ in element.properties]
-    if not names:
-        raise InputError("vertex element without properties", path=path)
-    if len(set(names)) != len(names):
-        raise InputError(f"duplicate vertex properties: {' '.join(names)}", path=path)
     n = element.count
-    dtype = np.dtype([(name, byte_order + code) for name, code in element.properties])
+    dtype = _vertex_dtype(element, byte_order, path)
     if n == 0:
         array = np.zeros(0, dtype=dtype)
     elif binary:

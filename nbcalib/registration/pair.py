@@ -81,18 +81,7 @@ class RegistrationPair:
         *,
         cloud: Cloud | None = None,
     ):
-        if points_lidar is not None or intensities is not None:
-            # arrays make a new cloud (``replace(pair, points_lidar=...)`` with the old one)
-            if cloud is not None:
-                points_lidar = cloud.points if points_lidar is None else points_lidar
-                intensities = cloud.intensities if intensities is None else intensities
-            if points_lidar is None or intensities is None:
-                raise ValueError("a registration pair needs its points and intensities, or a cloud")
-            cloud = Cloud(points_lidar, intensities, classes=classes)
-        elif cloud is None:
-            raise ValueError("a registration pair needs its points and intensities, or a cloud")
-        elif classes is not None:
-            cloud.classes = np.asarray(classes, dtype=np.int8)
+        cloud = Cloud.given(cloud, points_lidar, intensities, classes)
         self.camera = camera
         self.image = image
         self.cloud = cloud
