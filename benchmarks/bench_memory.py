@@ -15,7 +15,7 @@ worktree), one after the other on the same data: the two results must be equal t
   ROS 2 bag, 9 GB), then ``nbcalib run BAG WORK --pair-count 20 --no-matching --init START``.
 
 Each version first runs one short job, not measured, so that numba has compiled its kernels.
-Run one at a time on an idle machine:
+Run one at a time on an idle machine (`--repeat N`: each case N times, the versions in turn):
 
     python benchmarks/bench_memory.py --pairs 1,15,50 --recording 1,10 --base a03eaf4 --keep DIR
 
@@ -69,10 +69,13 @@ def start_of(gt: Path) -> str:
     return ",".join(f"{v:.12g}" for v in pose_to_xyz_quat(invert_T(start)))
 
 
-def measure(label: str, inputs: list, extra: list, gt: Path, root: Path, codes: dict) -> list:
-    """``nbcalib run INPUTS WORK EXTRA`` with each nbcalib of ``codes``: one row each."""
+def measure(
+    label: str, inputs: list, extra: list, gt: Path, root: Path, codes: dict, repeat: int = 1
+) -> list:
+    """``nbcalib run INPUTS WORK EXTRA`` with each nbcalib of ``codes`` in turn, ``repeat``
+    times over: one row each run."""
     rows = []
-    for version, code in codes.items():
+    for version, code in [item for _ in range(repeat) for item in codes.items()]:
         work = root / f"work_{label}_{version}"
         shutil.rmtree(work, ignore_errors=True)
         t0 = time.perf_counter()
@@ -80,7 +83,8 @@ def measure(label: str, inputs: list, extra: list, gt: Path, root: Path, codes: 
         wall = time.perf_counter() - t0
         ev, _ = nbcalib("evaluate", work, "--ground-truth", gt)
         errors = json.loads(ev.stdout.splitlines()[-1])
-        result = json.loads((work / "calib.json").read_text())["results"]["T_lidar_camera"]
+        record = json.loads((work / "calib.json").read_text())
+        result = record["results"]["T_lidar_camera"]
         row = {
             "case": label,
             "version": version,
@@ -89,6 +93,8 @@ def measure(label: str, inputs: list, extra: list, gt: Path, root: Path, codes: 
             "cm": round(100 * errors["translation_error_m"], 4),
             "deg": round(errors["rotation_error_deg"], 5),
             "result": result,
+            # each stage's wall time, as the job recorded it
+            "stages": record.get("nbcalib", {}).get("seconds", {}),
         }
         print(f"{label} ({version}): {row}", file=sys.stderr, flush=True)
         rows.append(row)
@@ -119,7 +125,8 @@ def pairs_case(pairs: int, args, root: Path, codes: dict) -> list:
                 "--seed", args.seed, "--format", "bag2")  # fmt: skip
     gt = out / "ground_truth.json"
     extra = ["--no-matching", f"--init={start_of(gt)}"]
-    return measure(f"{pairs} pairs", sorted(out.glob("pair_*")), extra, gt, root, codes)
+    inputs = sorted(out.glob("pair_*"))
+    return measure(f"{pairs} pairs", inputs, extra, gt, root, codes, args.repeat)
 
 
 def write_recording(out: Path, minutes: float, seed: int) -> Path:
@@ -160,7 +167,7 @@ def recording_case(minutes: float, args, root: Path, codes: dict) -> list:
         write_recording(out, minutes, args.seed)
     gt = out / "ground_truth.json"
     extra = ["--pair-count", "20", "--no-matching", f"--init={start_of(gt)}"]
-    return measure(f"{minutes:g} min", [out / "recording"], extra, gt, root, codes)
+    return measure(f"{minutes:g} min", [out / "recording"], extra, gt, root, codes, args.repeat)
 
 
 def main(argv=None) -> int:
@@ -171,6 +178,8 @@ def main(argv=None) -> int:
     ap.add_argument("--lidar", default="livox")
     ap.add_argument("--camera", default="pinhole")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--repeat", type=int, default=1,
+                    help="run each case this many times (the versions in turn)")  # fmt: skip
     ap.add_argument("--keep", type=Path, help="keep the data here (and reuse it)")
     args = ap.parse_args(argv)
     root = (args.keep or Path(tempfile.mkdtemp(prefix="nbcalib_memory_"))).resolve()
@@ -199,11 +208,15 @@ def main(argv=None) -> int:
         if args.base:
             subprocess.run(["git", "-C", str(ROOT), "worktree", "remove", "--force",
                             str(base_code)], capture_output=True)  # fmt: skip
-    print("| case | version | peak RSS, MB | wall s | result cm / deg |")
-    print("|---|---|---|---|---|")
+    print("| case | version | peak RSS, MB | wall s | preprocess / calibrate / report s | result "
+          "cm / deg |")  # fmt: skip
+    print("|---|---|---|---|---|---|")
     for r in rows:
         result = f"{r['cm']:.2f} / {r['deg']:.3f}"
-        print(f"| {r['case']} | {r['version']} | {r['peak_mb']:.0f} | {r['wall_s']} | {result} |")
+        stages = " / ".join(f"{r['stages'].get(k, float('nan')):.1f}"
+                            for k in ("preprocess", "calibrate", "report"))  # fmt: skip
+        print(f"| {r['case']} | {r['version']} | {r['peak_mb']:.0f} | {r['wall_s']} | {stages} | "
+              f"{result} |")  # fmt: skip
     same = {}
     for r in rows:
         same.setdefault(r["case"], set()).add(tuple(r["result"]))

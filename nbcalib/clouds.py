@@ -19,7 +19,8 @@ of the points (:meth:`nbcalib.registration.pair.RegistrationPair.orientation_cla
 with the cloud: one byte per point, computed once.
 
 A stage that uses a read cloud several times in a row pins it (``with cloud.held():``), so that
-it is read once for that stretch and released after.
+it is read once for that stretch and released after, and takes the rows it needs
+(:meth:`Cloud.rows`): a cost's subset widened to float64, not the whole cloud.
 """
 
 from __future__ import annotations
@@ -32,6 +33,13 @@ from pathlib import Path
 import numpy as np
 
 __all__ = ["Cloud", "MemoryBudget", "nbytes"]
+
+#: How much of the budget each kind of product may fill (:meth:`MemoryBudget.get`), by what it
+#: costs to make again per byte (a Livox pair, this Xeon): a visible set (a z-buffer, 0.1 s for
+#: 15 MB) and a KD-tree (seconds) may fill it all; the sample keys (a draw, 15 ms for 8.5 MB)
+#: half; the file's values (a read, 15 ms for 34 MB) a quarter. The cheapest leave room for
+#: the dearest: the report asks each pair's visible set at the result four times.
+SHARES = {"file": 0.25, "keys": 0.5}
 
 
 def nbytes(value) -> int:
@@ -197,16 +205,32 @@ class Cloud:
         """Whether the arrays are held (not read from a file)."""
         return self.path is None
 
-    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(points, intensities)``: held, pinned, kept in the budget, or read now."""
+    def _values(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(points, intensities)`` as stored: held, pinned, kept in the budget, or read now."""
         if self._arrays is not None:
             return self._arrays
         with self._lock:
             if self._pinned is not None:
                 return self._pinned
-        # the file's values take at most 3/4 of the budget: what is computed from them costs
-        # more to make again than a read (a z-buffer, a KD-tree)
-        points, intensities = self.memo("file", lambda: _read_ply_cloud(self.path), share=0.75)
+        return self.memo("file", lambda: _read_ply_cloud(self.path))
+
+    def arrays(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(points, intensities)``, float64 for a cloud read from its file (exact)."""
+        points, intensities = self._values()
+        if self._arrays is not None:
+            return points, intensities
+        return points.astype(np.float64), intensities.astype(np.float64)
+
+    def rows(self, index) -> tuple[np.ndarray, np.ndarray]:
+        """``(points[index], intensities[index])``, float64 for a cloud read from its file.
+
+        The rows are taken before the file's float32 values are widened (exactly): a cost's
+        few hundred thousand points, not the whole cloud.
+        """
+        points, intensities = self._values()
+        points, intensities = points[index], np.asarray(intensities)[index]
+        if self._arrays is not None:
+            return points, intensities
         return points.astype(np.float64), intensities.astype(np.float64)
 
     @property
@@ -221,22 +245,31 @@ class Cloud:
 
     @contextmanager
     def held(self):
-        """Keep the arrays in memory while the block runs; yields ``(points, intensities)``."""
+        """Keep the cloud's values in memory while the block runs (read once for it).
+
+        What is pinned is the file's own values (float32): :meth:`rows` takes from them and
+        :meth:`arrays` widens them when the whole cloud is asked for.
+        """
         with self._lock:
             if self._pins == 0 and self._arrays is None:
-                self._pinned = self.arrays()
+                self._pinned = self._values()
             self._pins += 1
         try:
-            yield self.arrays()
+            yield
         finally:
             with self._lock:
                 self._pins -= 1
                 if self._pins == 0:
                     self._pinned = None
 
-    def memo(self, key: Hashable, make: Callable[[], object], *, share: float = 1.0) -> object:
-        """A product of this cloud: kept under ``key`` in the budget, or ``make()``."""
-        return self.budget.get((id(self), key), make, share=share)
+    def memo(self, key: Hashable, make: Callable[[], object]) -> object:
+        """A product of this cloud: kept under ``key`` in the budget, or ``make()``.
+
+        ``key`` is a name, or a tuple whose first item is one: its kind, whose share of the
+        budget :data:`SHARES` gives (1 when not listed).
+        """
+        kind = key[0] if isinstance(key, tuple) else key
+        return self.budget.get((id(self), key), make, share=SHARES.get(kind, 1.0))
 
     def forget(self, key: Hashable) -> None:
         """Drop a product of this cloud from the budget."""

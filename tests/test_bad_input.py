@@ -141,9 +141,8 @@ class Case:
     during: object = None  # callable(paths) -> context manager around the command (a fault)
 
 
-@contextlib.contextmanager
-def _held_elsewhere(path: Path):
-    """The work directory's lock held by another process while the block runs."""
+def hold_lock(path: Path):
+    """Another process, holding the lock of work directory ``path`` until stopped (Popen)."""
     import subprocess
     import sys
     import textwrap
@@ -158,8 +157,18 @@ def _held_elsewhere(path: Path):
         """
     )
     proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
+    if proc.stdout.readline().strip() != "held":
+        proc.kill()
+        proc.wait(timeout=30)
+        raise AssertionError(f"the holder of {path}'s lock did not start")
+    return proc
+
+
+@contextlib.contextmanager
+def _held_elsewhere(path: Path):
+    """The work directory's lock held by another process while the block runs."""
+    proc = hold_lock(path)
     try:
-        assert proc.stdout.readline().strip() == "held"
         yield proc
     finally:
         proc.kill()

@@ -99,9 +99,12 @@ def test_held_reads_once_and_lets_go(ply, monkeypatch):
     real = clouds._read_ply_cloud
     monkeypatch.setattr(clouds, "_read_ply_cloud", lambda p: reads.append(p) or real(p))
     cloud = Cloud(path=path, size=5000, budget=MemoryBudget(0))
-    with cloud.held() as (p, _):
-        with cloud.held():  # nested: still the same arrays
-            assert cloud.points is p and cloud.intensities is cloud.arrays()[1]
+    with cloud.held():
+        with cloud.held():  # nested: still the same values, not read again
+            assert np.array_equal(cloud.points, points)
+            rows, values = cloud.rows(np.array([4, 0, 7]))
+            assert rows.dtype == np.float64 and np.array_equal(rows, points[[4, 0, 7]])
+            assert np.array_equal(values, cloud.intensities[[4, 0, 7]])
     assert len(reads) == 1
     assert np.array_equal(cloud.points, points) and len(reads) == 2  # let go: read again
     kept = Cloud(path=path, size=5000, budget=MemoryBudget(None))
@@ -119,6 +122,21 @@ def test_a_cloud_takes_its_products_with_it(ply):
     del cloud
     gc.collect()
     assert budget.used == 0
+
+
+def test_the_cheapest_products_leave_room_for_the_dearest(ply):
+    """The file's values (a read) fill at most a quarter of the budget, a visible set all."""
+    from nbcalib.clouds import SHARES
+
+    path, _, _ = ply
+    file_bytes = 5000 * 16
+    budget = MemoryBudget(int(file_bytes / SHARES["file"]) - 1)  # just too small for them
+    cloud = Cloud(path=path, size=5000, budget=budget)
+    assert len(cloud.points) == 5000 and budget.used == 0  # read, not kept
+    cloud.memo(("visible", 1), lambda: np.zeros(2 * 5000, np.int32))
+    assert budget.used == 5000 * 8  # kept
+    roomy = Cloud(path=path, size=5000, budget=MemoryBudget(int(file_bytes / SHARES["file"])))
+    assert len(roomy.points) == 5000 and roomy.budget.used == file_bytes
 
 
 def test_a_cloud_is_given_arrays_or_a_file(ply):
@@ -180,7 +198,9 @@ def test_visibility_is_kept_for_the_last_two_poses(tmp_path, rng):
     T, _, read = _pairs(tmp_path, rng, MemoryBudget(None))
     poses = [offset_pose(T, 0.2, 0.01, seed) for seed in range(3)]
     first = read.visibility(poses[0], 0.1, 0)
-    assert first[0].dtype == np.int64 and first[1].dtype == np.int64
+    assert first[0].dtype == np.int32 and first[1].dtype == np.int32  # kept compact
+    assert not first[0].flags.writeable  # shared by every call at the pose
+    assert read.visibility(poses[0], 0.1, 0)[0] is first[0]
     kept = read.cloud.budget.used
     read.visibility(poses[1], 0.1, 0)
     two = read.cloud.budget.used

@@ -14,7 +14,6 @@ import shutil
 import signal
 import subprocess
 import sys
-import textwrap
 from pathlib import Path
 
 import pytest
@@ -22,7 +21,13 @@ import pytest
 from nbcalib.cli import main
 from nbcalib.io.ground_truth import write_ground_truth
 from nbcalib.io.workdir_lock import LOCK_FILE, holder, workdir_lock
-from tests.test_bad_input import INIT, T_TRUE, _plain, base  # noqa: F401 (a fixture)
+from tests.test_bad_input import (  # noqa: F401 (base: a fixture)
+    INIT,
+    T_TRUE,
+    _plain,
+    base,
+    hold_lock,
+)
 
 
 def _digest(folder: Path) -> dict[str, str]:
@@ -41,29 +46,13 @@ def work(base, tmp_path):  # noqa: F811
     return out
 
 
-def _hold(path: Path) -> subprocess.Popen:
-    """Another process holding the lock of ``path`` until killed."""
-    code = textwrap.dedent(
-        f"""
-        import sys, time
-        from nbcalib.io.workdir_lock import workdir_lock
-        with workdir_lock({str(path)!r}):
-            print("held", flush=True)
-            time.sleep(600)
-        """
-    )
-    proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
-    assert proc.stdout.readline().strip() == "held"
-    return proc
-
-
 def _stop(proc: subprocess.Popen, sig=signal.SIGTERM) -> None:
     proc.send_signal(sig)
     proc.wait(timeout=30)
 
 
 def test_a_second_job_is_refused_at_every_stage_that_writes(work, base, capsys):  # noqa: F811
-    proc = _hold(work)
+    proc = hold_lock(work)
     try:
         before = _digest(work)
         for argv in (
@@ -88,7 +77,7 @@ def test_a_second_job_is_refused_at_every_stage_that_writes(work, base, capsys):
 def test_read_only_commands_run_beside_a_job(work, tmp_path, capsys):
     gt = tmp_path / "ground_truth.json"
     write_ground_truth(gt, T_TRUE)
-    proc = _hold(work)
+    proc = hold_lock(work)
     try:
         assert main(["-q", "evaluate", str(work), "--ground-truth", str(gt)]) == 0
         assert main(["-q", "export", str(work), "--out", str(tmp_path / "out")]) == 0
@@ -98,7 +87,7 @@ def test_read_only_commands_run_beside_a_job(work, tmp_path, capsys):
 
 
 def test_a_lock_left_by_a_killed_job_is_taken_over(work, caplog):
-    proc = _hold(work)
+    proc = hold_lock(work)
     _stop(proc, signal.SIGKILL)  # killed: the lock file still names it
     assert holder(work)["pid"] == proc.pid
     assert main(["-q", "report", str(work)]) == 0

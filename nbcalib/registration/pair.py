@@ -110,6 +110,10 @@ class RegistrationPair:
     def __len__(self) -> int:
         return len(self.cloud)
 
+    def rows(self, index) -> tuple[np.ndarray, np.ndarray]:
+        """``(points_lidar[index], intensities[index])``, float64 (:meth:`Cloud.rows`)."""
+        return self.cloud.rows(index)
+
     def held(self):
         """``with pair.held():`` reads the cloud once for the block (:meth:`Cloud.held`)."""
         return self.cloud.held()
@@ -118,11 +122,13 @@ class RegistrationPair:
         """The visible points at one pose and their pixels, kept for later calls.
 
         :func:`~nbcalib.preprocess.lidar_image.visibility`, returned as ``(keep, pixel)``:
-        the visible points' rows in cloud order (M,) and the flat pixel of each (M,), both
-        int64. The report asks for the visible set at the result four times (its cost, the
+        the visible points' rows in cloud order (M,) and the flat pixel of each (M,), int32
+        (int64 for a cloud or an image past 2^31), read-only: the same arrays for every call at
+        this pose. The report asks for the visible set at the result four times (its cost, the
         pixels covered, the overlays) and at the start once: the z-buffer's answer is kept for
         the last two poses asked of the cloud (as the job's memory budget allows, in int32:
-        5.6 MB a Livox pair where the z-buffer's own arrays take 23 MB).
+        15 MB a synthetic Livox pair of 2.2 M points). An older pose's is dropped before a new
+        one is made, which then finds room.
         """
         from nbcalib.preprocess.lidar_image import visibility
 
@@ -134,18 +140,20 @@ class RegistrationPair:
             keep, pixel = visibility(camera, T, cloud.points, margin=margin, window=window)
             small = len(cloud) < 2**31 and camera.width * camera.height < 2**31
             kind = np.int32 if small else np.int64
-            return camera, keep.astype(kind), pixel[keep].astype(kind)
+            rows, pixels = keep.astype(kind), pixel[keep].astype(kind)
+            rows.flags.writeable = pixels.flags.writeable = False
+            return camera, rows, pixels
 
-        entry = cloud.memo(key, make)
-        if entry[0] is not camera:  # another camera at the same address: not this one's
-            cloud.forget(key)
-            entry = cloud.memo(key, make)
         with cloud._lock:
             asked = [k for k in cloud.visible_keys if k != key] + [key]
             cloud.visible_keys = asked[-2:]
         for old in asked[:-2]:
             cloud.forget(old)
-        return entry[1].astype(np.int64), entry[2].astype(np.int64)
+        entry = cloud.memo(key, make)
+        if entry[0] is not camera:  # another camera at the same address: not this one's
+            cloud.forget(key)
+            entry = cloud.memo(key, make)
+        return entry[1], entry[2]
 
     def structure(self) -> tuple[np.ndarray, np.ndarray]:
         """(depth-edge score per point, image edge strength): the structure channel, made once.
@@ -224,7 +232,7 @@ def visible_subset(
     if select is not None:  # a subset of keep, in its order: their pixels by position
         chosen = select(keep)
         pixel, keep = pixel[np.searchsorted(keep, chosen)], chosen
-    return keep[np.argsort(pixel, kind="stable")]
+    return keep[np.argsort(pixel, kind="stable")].astype(np.int64)
 
 
 def downscale_camera(camera: CameraModel, level: int) -> CameraModel:

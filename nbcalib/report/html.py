@@ -207,22 +207,21 @@ def _write_figures(folder: Path, quality, loaded, pairs, config, T, T_init, step
                 poses.append(("initial guess", T_init, visible_subset(pair, T_init, config)))
             poses.append(("result", T, result))
             stem = _safe(pair.name or str(k))
+            points, intensities = pair.cloud.arrays()  # float64 once for the three figures
             edges = fg.lidar_edge_points(
-                work_pair.lidar_image.intensity, work_pair.lidar_index, pair.points_lidar
+                work_pair.lidar_image.intensity, work_pair.lidar_index, points
             )
             save(
                 f"alignment_{stem}.png",
-                fg.alignment(pair.camera, work_pair.image, pair.points_lidar, edges, T, result),
+                fg.alignment(pair.camera, work_pair.image, points, edges, T, result),
             )
             save(
                 f"overlay_{stem}.png",
-                fg.overlays(
-                    pair.camera, work_pair.image, pair.points_lidar, pair.intensities, poses
-                ),
+                fg.overlays(pair.camera, work_pair.image, points, intensities, poses),
             )
             save(
                 f"edges_{stem}.png",
-                fg.edge_overlay(pair.camera, work_pair.image, pair.points_lidar, edges, poses),
+                fg.edge_overlay(pair.camera, work_pair.image, points, edges, poses),
             )
     return written
 

@@ -43,7 +43,7 @@ def _pixels_covered(pair: RegistrationPair, T: np.ndarray, config: RefineConfig)
     keep = visible_subset(pair, T, config)
     if keep.size == 0:
         return 0
-    points = np.asarray(pair.points_lidar, dtype=np.float64)[keep]
+    points = pair.rows(keep)[0]
     uv, valid = pair.camera.project(points @ T[:3, :3].T + T[:3, 3], in_image=True)
     pix = np.floor(uv[valid] + 0.5).astype(np.int64)
     hit = np.zeros(pair.camera.width * pair.camera.height, dtype=bool)  # O(N), not a sort

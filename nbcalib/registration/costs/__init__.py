@@ -82,12 +82,12 @@ class PairView:
     @property
     def points(self) -> np.ndarray:
         """The kept points (K, 3), LiDAR frame."""
-        return self.pair.points_lidar[self.keep]
+        return self.pair.rows(self.keep)[0]
 
     @property
     def intensities(self) -> np.ndarray:
         """Their intensities (K,), in [0, 1]."""
-        return np.asarray(self.pair.intensities)[self.keep]
+        return self.pair.rows(self.keep)[1]
 
     def anchor_pixels(self) -> tuple[np.ndarray, np.ndarray]:
         """Pixels (K, 2) of the kept points at the anchor, full resolution, and their validity."""

@@ -28,11 +28,12 @@ def terms(view, config) -> list:
     )
     out = []
     for group in groups:
+        points, intensities = view.pair.rows(group)
         cost = NIDCost(
             view.camera,
             view.image,
-            view.pair.points_lidar[group],
-            np.asarray(view.pair.intensities)[group],
+            points,
+            intensities,
             bins=config.bins,
             form=view.form,
             parallel=config.parallel,

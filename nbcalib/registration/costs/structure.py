@@ -21,7 +21,7 @@ def terms(view, config) -> list:
     cost = NIDCost(
         view.camera,
         downscale_image(edges, view.level, equalize=False),
-        view.pair.points_lidar[view.keep],
+        view.points,
         scores[view.keep],
         bins=config.bins,
         form=view.form,
