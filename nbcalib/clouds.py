@@ -205,8 +205,11 @@ class Cloud:
         """Whether the arrays are held (not read from a file)."""
         return self.path is None
 
-    def _values(self) -> tuple[np.ndarray, np.ndarray]:
-        """``(points, intensities)`` as stored: held, pinned, kept in the budget, or read now."""
+    def stored(self) -> tuple[np.ndarray, np.ndarray]:
+        """``(points, intensities)`` as stored: float32 for a cloud read from its file.
+
+        Held, pinned, kept in the budget, or read now; to be read only (they may be shared).
+        """
         if self._arrays is not None:
             return self._arrays
         with self._lock:
@@ -216,10 +219,7 @@ class Cloud:
 
     def arrays(self) -> tuple[np.ndarray, np.ndarray]:
         """``(points, intensities)``, float64 for a cloud read from its file (exact)."""
-        points, intensities = self._values()
-        if self._arrays is not None:
-            return points, intensities
-        return points.astype(np.float64), intensities.astype(np.float64)
+        return self.points, self.intensities
 
     def rows(self, index) -> tuple[np.ndarray, np.ndarray]:
         """``(points[index], intensities[index])``, float64 for a cloud read from its file.
@@ -227,7 +227,7 @@ class Cloud:
         The rows are taken before the file's float32 values are widened (exactly): a cost's
         few hundred thousand points, not the whole cloud.
         """
-        points, intensities = self._values()
+        points, intensities = self.stored()
         points, intensities = points[index], np.asarray(intensities)[index]
         if self._arrays is not None:
             return points, intensities
@@ -235,13 +235,15 @@ class Cloud:
 
     @property
     def points(self) -> np.ndarray:
-        """The points (N, 3), LiDAR frame, metres."""
-        return self.arrays()[0]
+        """The points (N, 3), LiDAR frame, metres (float64 for a cloud read from its file)."""
+        points = self.stored()[0]
+        return points if self._arrays is not None else points.astype(np.float64)
 
     @property
     def intensities(self) -> np.ndarray:
-        """The intensities (N,), in [0, 1]."""
-        return self.arrays()[1]
+        """The intensities (N,), in [0, 1] (float64 for a cloud read from its file)."""
+        values = self.stored()[1]
+        return values if self._arrays is not None else values.astype(np.float64)
 
     @contextmanager
     def held(self):
@@ -252,7 +254,7 @@ class Cloud:
         """
         with self._lock:
             if self._pins == 0 and self._arrays is None:
-                self._pinned = self._values()
+                self._pinned = self.stored()
             self._pins += 1
         try:
             yield

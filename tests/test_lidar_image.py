@@ -197,6 +197,24 @@ def test_visible_mask_equals_reference(name, window, rng):
     assert 0 < got.sum() < len(points)
 
 
+@pytest.mark.parametrize("name", list(CAMERAS))
+def test_float32_points_are_the_float64_cloud_bit_for_bit(name, rng):
+    """A work directory's float32 cloud goes in without a float64 copy: the same answers."""
+    from nbcalib.preprocess.lidar_image import visibility
+
+    camera, T = CAMERAS[name]
+    points32 = _nasty_cloud(rng, camera, T).astype(np.float32)
+    points64 = points32.astype(np.float64)
+    for w in (0, 2):
+        got, want = (visibility(camera, T, p, margin=0.3, window=w) for p in (points32, points64))
+        assert all(np.array_equal(g, e) for g, e in zip(got, want))
+        assert 0 < got[0].size < len(points32)
+    values = rng.random(len(points32))
+    a, b = (render_lidar_image(camera, T, p, values) for p in (points32, points64))
+    for field in ("index", "depth", "intensity"):
+        assert np.array_equal(getattr(a, field), getattr(b, field))
+
+
 def test_visible_mask_hides_a_wall_behind_a_board():
     camera, T = make_virtual_camera(math.radians(60.0), pinhole_size=64)
     g = np.linspace(-1.5, 1.5, 121)

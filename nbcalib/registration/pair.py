@@ -137,7 +137,9 @@ class RegistrationPair:
         key = ("visible", T.tobytes(), float(margin), int(window), id(camera))
 
         def make():
-            keep, pixel = visibility(camera, T, cloud.points, margin=margin, window=window)
+            # the stored values: float32 from a work directory, widened in the kernel (exact)
+            points = cloud.stored()[0]
+            keep, pixel = visibility(camera, T, points, margin=margin, window=window)
             small = len(cloud) < 2**31 and camera.width * camera.height < 2**31
             kind = np.int32 if small else np.int64
             rows, pixels = keep.astype(kind), pixel[keep].astype(kind)
