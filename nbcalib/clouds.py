@@ -109,11 +109,15 @@ def _read_ply_cloud(path: Path) -> tuple[np.ndarray, np.ndarray]:
     """Points (N, 3) and intensities (N,) of a work directory's PLY, in the file's dtype.
 
     The work directory stores float32: kept so, a cloud takes half the memory of the float64
-    arrays the stages use (:meth:`Cloud.arrays` converts, exactly).
+    arrays the stages use (:meth:`Cloud.arrays` converts, exactly). Stored as nbcalib writes it
+    (x, y, z, intensity, float32), both are views of the block read from the file: no copy.
     """
     from nbcalib.errors import InputError
-    from nbcalib.io.ply import read_ply_fields
+    from nbcalib.io.ply import read_ply_fields, read_ply_xyzi
 
+    block = read_ply_xyzi(path)
+    if block is not None:
+        return block[:, :3], block[:, 3]
     fields = read_ply_fields(path)
     missing = [k for k in ("x", "y", "z", "intensity") if k not in fields]
     if missing:

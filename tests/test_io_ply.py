@@ -92,3 +92,21 @@ def test_corrupt_ply(tmp_path, content, problem):
     with pytest.raises(InputError, match=problem) as info:
         read_pointcloud(tmp_path / "bad.ply")
     assert "bad.ply" in str(info.value)
+
+
+def test_the_work_directory_layout_is_read_as_one_block(tmp_path, rng):
+    """x, y, z, intensity float32 (as nbcalib writes): one (N, 4) block, the fields' values."""
+    from nbcalib.io.ply import read_ply_fields, read_ply_xyzi
+
+    points, values = rng.normal(size=(300, 3)), rng.random(300)
+    write_ply(tmp_path / "a.ply", points, values)
+    block = read_ply_xyzi(tmp_path / "a.ply")
+    fields = read_ply_fields(tmp_path / "a.ply")
+    assert block.shape == (300, 4) and block.dtype == np.float32
+    for k, name in enumerate(("x", "y", "z", "intensity")):
+        assert np.array_equal(block[:, k], fields[name])
+    # any other layout: None, for the general reader
+    write_ply(tmp_path / "b.ply", points)  # no intensity
+    write_ply(tmp_path / "c.ply", points, values, encoding="ascii")
+    assert read_ply_xyzi(tmp_path / "b.ply") is None
+    assert read_ply_xyzi(tmp_path / "c.ply") is None

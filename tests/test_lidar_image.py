@@ -203,8 +203,11 @@ def test_float32_points_are_the_float64_cloud_bit_for_bit(name, rng):
     from nbcalib.preprocess.lidar_image import visibility
 
     camera, T = CAMERAS[name]
-    points32 = _nasty_cloud(rng, camera, T).astype(np.float32)
+    cloud = _nasty_cloud(rng, camera, T)
+    rows = np.column_stack([cloud, rng.random(len(cloud))]).astype(np.float32)
+    points32 = rows[:, :3]  # as a work directory's cloud is read: a view of x, y, z, intensity
     points64 = points32.astype(np.float64)
+    assert not points32.flags.c_contiguous
     for w in (0, 2):
         got, want = (visibility(camera, T, p, margin=0.3, window=w) for p in (points32, points64))
         assert all(np.array_equal(g, e) for g, e in zip(got, want))

@@ -132,6 +132,30 @@ def read_ply_vertex_header(path) -> tuple[int, list[str]]:
     return count, list(dtype.names)
 
 
+def read_ply_xyzi(path) -> np.ndarray | None:
+    """The vertices as one (N, 4) float32 block, if that is how the file stores them.
+
+    For a binary PLY whose vertices come first as exactly ``x, y, z, intensity``, float32 in
+    native byte order (how a work directory stores a dense cloud): read straight from the file,
+    no column copied; columns 0-2 are the points and 3 the intensities. None for any other
+    layout (:func:`read_ply_fields` reads every layout).
+    """
+    path = Path(path)
+    layout = _vertex_layout(path)
+    if layout is None:
+        return None
+    dtype, count, offset = layout
+    f32 = np.dtype(np.float32)
+    if (
+        dtype.names != ("x", "y", "z", "intensity")
+        or dtype.itemsize != 16
+        or [dtype.fields[n] for n in dtype.names] != [(f32, k) for k in (0, 4, 8, 12)]
+    ):
+        return None  # another layout, or not native float32
+    block = np.fromfile(path, dtype=np.float32, count=4 * count, offset=offset)
+    return block.reshape(count, 4)
+
+
 def read_ply_fields(path) -> dict[str, np.ndarray]:
     """Every property of the ``vertex`` element of a PLY file (ascii, binary LE or BE).
 

@@ -302,11 +302,13 @@ def _check_inputs(camera, T, points, name_T):
     T = np.ascontiguousarray(T, dtype=np.float64)
     if T.shape != (4, 4) or not np.all(np.isfinite(T)):
         raise ValueError(f"{name_T} must be a finite 4 x 4 matrix, got shape {T.shape}")
-    # float32 points (a work directory's cloud) go in as they are: the kernels widen each
-    # coordinate exactly before any arithmetic, so the result is the float64 cloud's, bit for
-    # bit, without a float64 copy of the whole cloud
-    kind = np.float32 if getattr(points, "dtype", None) == np.float32 else np.float64
-    points = np.ascontiguousarray(points, dtype=kind)
+    # float32 points (a work directory's cloud, a view of its x, y, z, intensity rows) go in as
+    # they are: the kernels widen each coordinate exactly before any arithmetic, so the result
+    # is the float64 cloud's, bit for bit, with no copy of the whole cloud
+    if isinstance(points, np.ndarray) and points.dtype == np.float32:
+        pass
+    else:
+        points = np.ascontiguousarray(points, dtype=np.float64)
     if points.ndim != 2 or points.shape[1] != 3:
         raise ValueError(f"points_lidar must have shape (N, 3), got {points.shape}")
     if points.shape[0] > np.iinfo(np.int32).max:
