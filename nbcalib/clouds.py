@@ -232,21 +232,20 @@ class Cloud:
         few hundred thousand points, not the whole cloud.
         """
         points, intensities = self.stored()
-        points, intensities = points[index], np.asarray(intensities)[index]
-        if self._arrays is not None:
-            return points, intensities
-        return points.astype(np.float64), intensities.astype(np.float64)
+        return self._wide(points[index]), self._wide(np.asarray(intensities)[index])
 
     @property
     def points(self) -> np.ndarray:
         """The points (N, 3), LiDAR frame, metres (float64 for a cloud read from its file)."""
-        points = self.stored()[0]
-        return points if self._arrays is not None else points.astype(np.float64)
+        return self._wide(self.stored()[0])
 
     @property
     def intensities(self) -> np.ndarray:
         """The intensities (N,), in [0, 1] (float64 for a cloud read from its file)."""
-        values = self.stored()[1]
+        return self._wide(self.stored()[1])
+
+    def _wide(self, values: np.ndarray) -> np.ndarray:
+        """Held values as given; the file's float32 widened to float64 (exact)."""
         return values if self._arrays is not None else values.astype(np.float64)
 
     @contextmanager

@@ -305,9 +305,7 @@ def _check_inputs(camera, T, points, name_T):
     # float32 points (a work directory's cloud, a view of its x, y, z, intensity rows) go in as
     # they are: the kernels widen each coordinate exactly before any arithmetic, so the result
     # is the float64 cloud's, bit for bit, with no copy of the whole cloud
-    if isinstance(points, np.ndarray) and points.dtype == np.float32:
-        pass
-    else:
+    if not (isinstance(points, np.ndarray) and points.dtype == np.float32):
         points = np.ascontiguousarray(points, dtype=np.float64)
     if points.ndim != 2 or points.shape[1] != 3:
         raise ValueError(f"points_lidar must have shape (N, 3), got {points.shape}")
